@@ -1,0 +1,67 @@
+"""Run the benchmarks and rewrite docs/BENCHMARKS.md.
+
+Each benchmark is a module ``bench/bench_<name>.py`` with ``run(quick: bool) -> dict`` returning
+``{"title": str, "markdown": str, ...figures}``. The dict is written to
+``bench/results/<name>.json``; the markdown sections are joined into docs/BENCHMARKS.md in name
+order. ``python -m bench [NAME ...] [--quick]`` runs some or all of them; sections of benchmarks not
+run this time are kept from their last JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+RESULTS = ROOT / "results"
+DOC = ROOT.parent / "docs" / "BENCHMARKS.md"
+
+
+def available() -> list[str]:
+    return sorted(p.stem.removeprefix("bench_") for p in ROOT.glob("bench_*.py"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all: {', '.join(available())})")
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")
+    args = parser.parse_args(argv)
+    names = args.names or available()
+    unknown = sorted(set(names) - set(available()))
+    if unknown:
+        parser.error(f"unknown benchmark(s): {', '.join(unknown)}")
+    RESULTS.mkdir(exist_ok=True)
+    for name in names:
+        print(f"== bench {name}", flush=True)
+        started = time.perf_counter()
+        result = importlib.import_module(f"bench.bench_{name}").run(quick=args.quick)
+        result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
+        result.setdefault("date", time.strftime("%Y-%m-%d"))
+        result["wall_s"] = round(time.perf_counter() - started, 1)
+        (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=2, default=float) + "\n")
+        print(result.get("markdown", ""), flush=True)
+    write_doc()
+    return 0
+
+
+def write_doc() -> None:
+    parts = [
+        "# Benchmarks\n",
+        "Written by `python -m bench` (or `make bench`) from `bench/results/*.json`; every figure "
+        "below was measured by the run named in its section, on the machine it names.\n",
+    ]
+    for path in sorted(RESULTS.glob("*.json")):
+        result = json.loads(path.read_text())
+        parts.append(f"\n## {result.get('title', path.stem)}\n")
+        parts.append(f"_`python -m bench {path.stem}` on {result.get('date')}, {result.get('machine')}, {result.get('wall_s')} s._\n")
+        parts.append(result.get("markdown", "") + "\n")
+    DOC.write_text("\n".join(parts))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

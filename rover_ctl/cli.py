@@ -1,0 +1,58 @@
+"""``rover-ctl``: the command line. Each subcommand lives in ``rover_ctl/commands/<name>.py`` and
+exposes ``add_parser(subparsers)``, which registers its parser and sets ``func(args) -> int``.
+
+Errors meant for the user are raised as ``UserError`` (or ``ConfigError``/``ValueError`` subclasses
+that carry a one-line message) and printed as ``rover-ctl: error: ...`` with exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from rover_ctl import __version__
+
+# Subcommand modules, in the order shown by --help.
+COMMANDS = ("run", "sim", "mission", "fuzzy")
+
+
+class UserError(Exception):
+    """A problem the user can fix (bad flag value, unreadable file, refused request)."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="rover-ctl",
+        description="Controller for GPS-guided skid-steer rovers over MAVLink.",
+    )
+    parser.add_argument("--version", action="version", version=f"rover-ctl {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"rover_ctl.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"rover_ctl.commands.{name}":
+                raise
+            continue  # a subcommand not built yet
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except UserError as exc:
+        print(f"rover-ctl: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

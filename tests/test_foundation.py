@@ -1,0 +1,59 @@
+"""The foundation: config loading and the CLI shell."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from rover_ctl.config import Config, ConfigError, load_config
+
+
+def test_defaults_are_the_papers_robot():
+    cfg = Config()
+    assert cfg.robot.track_m == pytest.approx(0.32)
+    assert cfg.robot.wheel_radius_m == pytest.approx(0.07)
+    # 200 rpm on a 0.07 m wheel is about 1.47 m/s.
+    assert cfg.robot.max_speed_mps == pytest.approx(1.466, abs=1e-3)
+
+
+def test_toml_and_overrides(tmp_path):
+    path = tmp_path / "rover.toml"
+    path.write_text('[robot]\ntrack_m = 0.5\n[link]\nvehicle_url = "udpin:127.0.0.1:14551"\n')
+    cfg = load_config(path, ["link.source_system=42", "robot.max_wheel_rpm=150"])
+    assert cfg.robot.track_m == 0.5
+    assert cfg.link.vehicle_url == "udpin:127.0.0.1:14551"
+    assert cfg.link.source_system == 42
+    assert cfg.robot.max_wheel_rpm == 150.0
+
+
+@pytest.mark.parametrize(
+    "text, override, message",
+    [
+        ("[robot]\ntrak_m = 1\n", [], "unknown key 'trak_m'"),
+        ("[nosuch]\nx = 1\n", [], "unknown key 'nosuch'"),
+        ("[robot]\ntrack_m = 'wide'\n", [], "robot.track_m: expected a number"),
+        ("[robot\n", [], "invalid TOML"),
+        ("", ["link.source_system=2.5"], "expected a whole number"),
+        ("", ["nodot=1"], "expected section.key=value"),
+    ],
+)
+def test_bad_config_is_one_clear_line(tmp_path, text, override, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message) as info:
+        load_config(path, override)
+    assert "\n" not in str(info.value)
+
+
+def test_missing_config_file(tmp_path):
+    with pytest.raises(ConfigError, match="no such config file"):
+        load_config(tmp_path / "absent.toml")
+
+
+def test_cli_help_and_bad_flag():
+    ok = subprocess.run([sys.executable, "-m", "rover_ctl.cli", "--help"], capture_output=True, text=True)
+    assert ok.returncode == 0 and "rover-ctl" in ok.stdout
+    bad = subprocess.run([sys.executable, "-m", "rover_ctl.cli", "--no-such-flag"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "unrecognized arguments: --no-such-flag" in bad.stderr
