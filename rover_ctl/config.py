@@ -60,11 +60,95 @@ class LinkParams:
 
 
 @dataclass
+class PlannerParams:
+    """Global planner (``rover_ctl.planner``): visibility graph around fences and known obstacles."""
+
+    clearance_margin_m: float = 0.5
+    """Kept free beyond the robot's half-width: obstacles and exclusion zones are inflated, and
+    inclusion fences shrunk, by ``robot.footprint_width_m / 2 + clearance_margin_m``."""
+    circle_segments: int = 16
+    """Vertices of the polygon that stands for an inflated circle (circumscribed, so it never
+    cuts into the clearance); more vertices: shorter paths, a bigger graph."""
+    lookahead_m: float = 3.0
+    """Carrot distance: the path target is this far along the path beyond the rover's projection."""
+    projection_window_m: float = 10.0
+    """The rover is projected on the path only up to this far beyond its last projection, so a
+    path that comes back near itself does not make the carrot jump ahead."""
+    replan_off_path_m: float = 3.0
+    """Re-plan from the current position when the cross-track error exceeds this."""
+    replan_min_interval_s: float = 1.0
+    """At most one re-plan per this interval (a new goal or a new blocked segment always re-plans)."""
+    blocked_radius_m: float = 0.6
+    """Radius of the temporary circular obstacle placed where the daemon reports a blocked leg."""
+    blocked_ttl_s: float = 30.0
+    """A temporary obstacle is forgotten after this long (moving obstacles go away)."""
+
+
+@dataclass
+class ExecutorParams:
+    """Mission executor (``rover_ctl.executor``), ArduPilot Rover's WP_* / RTL_* counterparts."""
+
+    acceptance_radius_m: float = 2.0
+    """Waypoint reached within this distance when the item's param2 is 0 (ArduPilot WP_RADIUS)."""
+    cruise_speed_mps: float = 1.2
+    """Speed limit in AUTO until a DO_CHANGE_SPEED (ArduPilot WP_SPEED); clamped to the robot's max."""
+    rtl_speed_mps: float = 0.0
+    """Speed limit in RTL; 0 uses the current mission speed (ArduPilot RTL_SPEED)."""
+    rtl_radius_m: float = 2.0
+    """Home reached within this distance, in RTL mode or at a NAV_RETURN_TO_LAUNCH item."""
+    max_items_per_update: int = 64
+    """Non-navigation items (DO_*, skipped ones) executed in one update at most: a mission that
+    jumps in a loop without a navigation command stops with a warning instead of hanging."""
+
+
+@dataclass
+class FailsafeParams:
+    """Failsafes (``rover_ctl.failsafe``); docs/failsafes.md gives trigger, action and recovery."""
+
+    recovery_s: float = 2.0
+    """A failsafe clears only after its cause has been gone this long (hysteresis)."""
+    vehicle_timeout_s: float = 1.0
+    """Vehicle link silent (no message at all) for longer than this: motors neutral, hold."""
+    gcs_timeout_s: float = 5.0
+    """GCS heartbeat older than this, once one was seen: GCS lost (ArduPilot FS_GCS_TIMEOUT)."""
+    gcs_action: str = "continue"
+    """On GCS loss: "continue" the mission, "hold" or "rtl" (ArduPilot FS_GCS_ENABLE/FS_ACTION)."""
+    rangefinder_timeout_s: float = 0.5
+    """A rangefinder silent for longer than this is reported so the navigator treats that side as blocked."""
+    required_rangefinders: list[int] = field(default_factory=lambda: [0, 2, 4, 6])
+    """DISTANCE_SENSOR orientations that must report (front, right, back, left: the paper's four)."""
+    gps_timeout_s: float = 1.0
+    """No GPS fix for longer than this: dead reckoning."""
+    dead_reckoning_max_s: float = 20.0
+    """Dead reckoning this long without a fix: hold."""
+    estimator_unhealthy_s: float = 0.5
+    """Estimator unhealthy for longer than this: hold."""
+    fence_action: str = "hold"
+    """On a fence breach: "hold" or "rtl" (ArduPilot FENCE_ACTION)."""
+    stuck_window_s: float = 4.0
+    """Stuck: motion commanded for this long while the rover moved less than stuck_progress_m."""
+    stuck_progress_m: float = 0.3
+    stuck_min_command_mps: float = 0.2
+    """A forward speed setpoint above this counts as commanded motion."""
+    back_off_s: float = 2.0
+    """How long to back off when stuck, before a re-plan."""
+    back_off_speed_mps: float = 0.3
+    """Reverse speed while backing off (the daemon drives it)."""
+    stuck_max_tries: int = 3
+    """Back-offs before giving up and holding."""
+    stuck_clear_m: float = 3.0
+    """Travelling this far after a back-off counts as free again: the tries start over."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here."""
 
     robot: RobotParams = field(default_factory=RobotParams)
     link: LinkParams = field(default_factory=LinkParams)
+    planner: PlannerParams = field(default_factory=PlannerParams)
+    executor: ExecutorParams = field(default_factory=ExecutorParams)
+    failsafe: FailsafeParams = field(default_factory=FailsafeParams)
 
 
 def _coerce(value: Any, current: Any, where: str) -> Any:
