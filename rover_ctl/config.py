@@ -141,6 +141,52 @@ class FailsafeParams:
 
 
 @dataclass
+class EstimatorParams:
+    """The pose filter (rover_ctl.estimator): sensor noise, gating, recovery and health.
+
+    Noise densities are 1-sigma; a ``..._per_sqrt_s`` figure adds ``value**2 * dt`` of variance
+    per ``dt`` seconds of prediction (a random walk)."""
+
+    gyro_noise_rad_per_sqrt_s: float = 0.003
+    """Heading random walk from gyro noise (angle random walk), rad/sqrt(s)."""
+    gyro_bias_walk_radps_per_sqrt_s: float = 0.0005
+    """How fast the gyro bias may wander, (rad/s)/sqrt(s)."""
+    gyro_bias_sigma0_radps: float = 0.02
+    """Gyro bias uncertainty at start (a consumer MEMS gyro is within about 1 deg/s)."""
+    compass_sigma_rad: float = 0.05
+    """Compass heading noise, 1-sigma (about 3 deg: soft-iron and motor interference)."""
+    speed_accel_per_sqrt_s: float = 1.5
+    """Random walk of the speed state between wheel readings, (m/s)/sqrt(s)."""
+    wheel_speed_sigma_mps: float = 0.03
+    """Wheel speed noise floor (encoder quantisation, timing), 1-sigma."""
+    wheel_slip_fraction: float = 0.03
+    """Longitudinal slip as a fraction of wheel speed, 1-sigma, added to the floor."""
+    lateral_slip_per_sqrt_s: float = 0.03
+    """Skid of the body sideways and along track not seen by wheels or gyro, m/sqrt(s)."""
+    wheel_max_speed_mps: float = 5.0
+    """A wheel delta faster than this is a counter reset or a glitch: re-baseline, do not fuse."""
+    gps_min_sigma_m: float = 0.5
+    """Floor on a fix's 1-sigma: eph below this is not believed."""
+    gps_default_sigma_m: float = 5.0
+    """1-sigma used when a fix reports no eph (UINT16_MAX)."""
+    gate_sigma: float = 5.0
+    """Innovation gate: a fix whose Mahalanobis distance exceeds this is rejected (EKF3's
+    EK3_POS_I_GATE is 5 sigma too)."""
+    glitch_reset_s: float = 5.0
+    """Fixes rejected continuously for this long mean the GPS really moved (or dead reckoning
+    drifted): reset the position to the GPS, as EKF3 does past EK3_GLITCH_RAD."""
+    max_lag_s: float = 0.5
+    """Readings older than the filter's time by up to this are fused with lag compensation;
+    older ones are dropped."""
+    gps_timeout_s: float = 1.0
+    """gps_ok is false when no fix was fused for longer than this."""
+    health_max_position_sigma_m: float = 5.0
+    """healthy is false when the position 1-sigma (worst axis) exceeds this."""
+    health_max_heading_sigma_rad: float = 0.26
+    """healthy is false when the heading 1-sigma exceeds this (about 15 deg)."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here."""
 
@@ -149,6 +195,7 @@ class Config:
     planner: PlannerParams = field(default_factory=PlannerParams)
     executor: ExecutorParams = field(default_factory=ExecutorParams)
     failsafe: FailsafeParams = field(default_factory=FailsafeParams)
+    estimator: EstimatorParams = field(default_factory=EstimatorParams)
 
 
 def _coerce(value: Any, current: Any, where: str) -> Any:
