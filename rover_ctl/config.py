@@ -187,6 +187,87 @@ class EstimatorParams:
 
 
 @dataclass
+class GcsParams:
+    """The GCS link: the daemon as the rover's autopilot, its mission service and the CLI client."""
+
+    system_id: int = 1
+    """Our MAVLink system id towards ground stations (SYSID_THISMAV)."""
+    component_id: int = 1
+    """MAV_COMP_ID_AUTOPILOT1."""
+    heartbeat_period_s: float = 1.0
+    mission_item_retry_s: float = 0.5
+    """Upload: re-request the expected item after this long without it."""
+    mission_upload_timeout_s: float = 8.0
+    """Upload: cancel after this long without progress (ArduPilot's upload timeout)."""
+    mission_max_items: int = 700
+    """Largest list (wire items, home included) accepted per mission type."""
+    mission_store_path: str = "~/.local/state/rover-ctl/mission.json"
+    """Where the current mission, fence and rally are persisted; empty = not persisted."""
+    position_rate_hz: float = 4.0
+    """Default GLOBAL_POSITION_INT rate until a GCS asks for another (SET_MESSAGE_INTERVAL)."""
+    gps_rate_hz: float = 2.0
+    attitude_rate_hz: float = 10.0
+    sys_status_rate_hz: float = 1.0
+    mission_current_rate_hz: float = 1.0
+    client_retry_s: float = 0.5
+    """`rover-ctl mission` client: resend a request after this long without an answer."""
+    client_retries: int = 10
+    """Client: resends of one request before giving up with a timeout error."""
+    client_connect_timeout_s: float = 5.0
+    """Client: wait this long for the autopilot's HEARTBEAT."""
+
+
+@dataclass
+class WheelControlParams:
+    """Wheel-speed loop and RC mixing (``rover_ctl.wheel_control``)."""
+
+    full_output_rpm: float = 250.0
+    """Wheel speed at full motor output on flat ground: the feed-forward ``u = rpm / this``."""
+    kp: float = 0.002
+    """Proportional gain, motor output per rpm of error."""
+    ki: float = 0.006
+    """Integral gain, motor output per rpm*s of error."""
+    integral_limit: float = 0.4
+    """Bound on the integral term's share of the motor output."""
+    speed_filter_tau_s: float = 0.06
+    """Low-pass time constant on wheel speeds measured from WHEEL_DISTANCE deltas."""
+    measurement_timeout_s: float = 0.3
+    """Wheel speeds older than this are not trusted: feed-forward only."""
+    rc_trim_us: int = 1500
+    """RC neutral (ArduPilot RC1/RC3_TRIM)."""
+    rc_range_us: int = 500
+    """RC full deflection from trim (RCx_MAX - RCx_TRIM)."""
+    rc_deadzone_us: int = 30
+    """The vehicle's RC dead zone (Rover's RC1_DZ/RC3_DZ default), inverted when mixing."""
+
+
+@dataclass
+class DaemonParams:
+    """The control loop (``rover_ctl.daemon``) and its vehicle-link housekeeping."""
+
+    control_rate_hz: float = 25.0
+    """Control steps per second of vehicle (sensor) time."""
+    vehicle_wait_s: float = 30.0
+    """Start-up: give up when no vehicle heartbeat arrives within this (wall clock)."""
+    command_timeout_s: float = 0.5
+    """Vehicle COMMAND_LONG answered by no COMMAND_ACK within this is sent again."""
+    command_retries: int = 3
+    """Re-sends of an unanswered vehicle command before it counts as failed."""
+    sensor_rate_hz: float = 50.0
+    """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE."""
+    gps_rate_hz: float = 5.0
+    rangefinder_rate_hz: float = 20.0
+    telemetry_rate_hz: float = 4.0
+    """GLOBAL_POSITION_INT / ATTITUDE / MISSION_CURRENT to the ground station."""
+    idle_wait_s: float = 0.05
+    """Longest blocking wait for link input in one loop turn (wall clock; bounds reaction to GCS)."""
+    hold_speed_mps: float = 0.05
+    """Below this estimated speed a hold counts as stopped."""
+    log_dir: str = ""
+    """Directory for vehicle.tlog, gcs.tlog and control.csv; empty: no logs."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here."""
 
@@ -196,6 +277,9 @@ class Config:
     executor: ExecutorParams = field(default_factory=ExecutorParams)
     failsafe: FailsafeParams = field(default_factory=FailsafeParams)
     estimator: EstimatorParams = field(default_factory=EstimatorParams)
+    wheel_control: WheelControlParams = field(default_factory=WheelControlParams)
+    daemon: DaemonParams = field(default_factory=DaemonParams)
+    gcs: GcsParams = field(default_factory=GcsParams)
 
 
 def _coerce(value: Any, current: Any, where: str) -> Any:

@@ -1,0 +1,357 @@
+"""The vehicle side of the MAVLink mission protocol, as a pure state machine.
+
+No sockets and no clock: the shell feeds every received message to ``handle(msg, now_s)`` and
+calls ``tick(now_s)`` regularly; both return the pymavlink messages to send. Messages are
+pymavlink message objects of the ardupilotmega dialect (MAVLink 2); a reply is always addressed
+to the requester's own system and component ids.
+
+Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemProtocol``:
+
+* Mission types MISSION (0), FENCE (1) and RALLY (2). For MISSION, wire seq 0 is home, as
+  ArduPilot numbers it: ``count = len(mission.items) + 1``. An uploaded seq 0 becomes
+  ``Mission.home`` (lat = lon = 0 means "no home"); a download reports ``vehicle_home`` (the
+  daemon's real home, once it has one) or else the stored mission's home at seq 0.
+* Upload: MISSION_COUNT -> MISSION_REQUEST_INT(seq) -> MISSION_ITEM_INT (or legacy MISSION_ITEM)
+  ... -> MISSION_ACK. A repeated MISSION_COUNT from the uploading sender restarts the upload;
+  any other sender trying to upload, clear or send items meanwhile gets MAV_MISSION_DENIED. An
+  out-of-sequence item is not fatal: a later one makes us re-request the expected seq at once,
+  an earlier one (a duplicate) is ignored. The expected seq is re-requested every
+  ``mission_item_retry_s`` without an answer; after ``mission_upload_timeout_s`` without progress
+  the upload is cancelled (MAV_MISSION_OPERATION_CANCELLED) and the stored mission is untouched.
+  If the final ACK is lost and the sender repeats the last item, the ACK is repeated.
+* Atomicity: received items go to a scratch list. Only a complete, valid upload is passed to
+  ``commit(new_mission)`` (the shell persists it there); if ``commit`` raises, the upload is
+  refused with MAV_MISSION_ERROR and the stored mission stays the old one.
+* Download: MISSION_REQUEST_LIST -> MISSION_COUNT; every MISSION_REQUEST_INT or legacy
+  MISSION_REQUEST in range is answered with MISSION_ITEM_INT (stateless, so lost requests are
+  simply repeated by the client); out of range gets MAV_MISSION_INVALID_SEQUENCE.
+* MISSION_CLEAR_ALL (one type or MAV_MISSION_TYPE_ALL) commits an emptied mission and ACKs.
+* MISSION_SET_CURRENT asks ``set_current(seq) -> bool`` (the executor) and answers
+  MISSION_CURRENT, or a STATUSTEXT warning when refused. ``mission_current`` and
+  ``item_reached`` build the broadcasts the daemon sends as the mission runs.
+
+Coordinates on the wire: for global frames x/y are degrees * 1e7; for local frames metres * 1e4
+(MISSION_ITEM_INT spec); otherwise the raw param5/param6 value.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from rover_ctl.config import GcsParams
+from rover_ctl.mission.model import FRAME_GLOBAL, GLOBAL_FRAMES, Home, Mission, MissionItem, MissionType
+
+MAV_CMD_NAV_WAYPOINT = 16
+MISSION_TYPE_ALL = 255
+MAV_COMP_ID_MISSIONPLANNER = 190
+"""Older ground stations address mission messages to this component; accepted as ours."""
+LOCAL_FRAMES = frozenset({1, 4, 7, 8, 9, 20, 21})
+"""MAV_FRAME_LOCAL_NED/ENU and body/offset variants: x/y are metres * 1e4 in MISSION_ITEM_INT."""
+FENCE_COMMANDS = frozenset(range(5000, 5005))
+RALLY_COMMANDS = frozenset({5100})
+
+Sender = tuple[int, int]
+
+
+def encode_xy(item: MissionItem) -> tuple[int, int]:
+    """Model x/y -> MISSION_ITEM_INT x/y integers (deg*1e7, m*1e4 or raw)."""
+    scale = 1e7 if item.frame in GLOBAL_FRAMES else 1e4 if item.frame in LOCAL_FRAMES else 1.0
+    return round(item.x * scale), round(item.y * scale)
+
+
+def decode_xy(frame: int, x: int, y: int) -> tuple[float, float]:
+    scale = 1e7 if frame in GLOBAL_FRAMES else 1e4 if frame in LOCAL_FRAMES else 1.0
+    return x / scale, y / scale
+
+
+def item_from_message(msg) -> MissionItem:
+    """MISSION_ITEM_INT or legacy MISSION_ITEM -> MissionItem."""
+    if msg.get_type() == "MISSION_ITEM_INT":
+        x, y = decode_xy(msg.frame, msg.x, msg.y)
+    else:
+        x, y = float(msg.x), float(msg.y)
+    return MissionItem(
+        command=msg.command,
+        frame=msg.frame,
+        param1=msg.param1,
+        param2=msg.param2,
+        param3=msg.param3,
+        param4=msg.param4,
+        x=x,
+        y=y,
+        z=msg.z,
+        autocontinue=bool(msg.autocontinue),
+    )
+
+
+def item_message(item: MissionItem, seq: int, mission_type: int, target: Sender, current: bool = False):
+    """MissionItem -> MISSION_ITEM_INT addressed to ``target``."""
+    x, y = encode_xy(item)
+    return mav.MAVLink_mission_item_int_message(
+        target[0], target[1], seq, item.frame, item.command, int(current), int(item.autocontinue),
+        item.param1, item.param2, item.param3, item.param4, x, y, item.z, mission_type,
+    )  # fmt: skip
+
+
+def home_item(home: Home | None) -> MissionItem:
+    """Seq 0 of a MISSION-type list as ArduPilot sends it (a NAV_WAYPOINT at home, frame GLOBAL)."""
+    if home is None:
+        return MissionItem(command=MAV_CMD_NAV_WAYPOINT, frame=FRAME_GLOBAL)
+    return MissionItem(command=MAV_CMD_NAV_WAYPOINT, frame=FRAME_GLOBAL, x=home.lat_deg, y=home.lon_deg, z=home.alt_m)
+
+
+def home_from_item(item: MissionItem) -> Home | None:
+    if not item.is_global or (item.x == 0.0 and item.y == 0.0):
+        return None
+    return Home(item.x, item.y, item.z)
+
+
+def wire_items(mission: Mission, mission_type: int, vehicle_home: Home | None = None) -> list[MissionItem]:
+    """The list a download of ``mission_type`` serves (home first for MISSION)."""
+    if mission_type == MissionType.MISSION:
+        return [home_item(vehicle_home or mission.home), *mission.items]
+    return list(mission.of_type(MissionType(mission_type)))
+
+
+def check_item(item: MissionItem, mission_type: int) -> int:
+    """MAV_MISSION_RESULT for one received item (MAV_MISSION_ACCEPTED if usable)."""
+    values = (item.param1, item.param2, item.param3, item.param4, item.x, item.y, item.z)
+    if any(math.isinf(v) for v in values):
+        return mav.MAV_MISSION_ERROR
+    if mission_type == MissionType.FENCE and item.command not in FENCE_COMMANDS:
+        return mav.MAV_MISSION_UNSUPPORTED
+    if mission_type == MissionType.RALLY and item.command not in RALLY_COMMANDS:
+        return mav.MAV_MISSION_UNSUPPORTED
+    if item.is_global and not (item.x == 0.0 and item.y == 0.0):
+        if not -90.0 <= item.x <= 90.0:
+            return mav.MAV_MISSION_INVALID_PARAM5_X
+        if not -180.0 <= item.y <= 180.0:
+            return mav.MAV_MISSION_INVALID_PARAM6_Y
+    return mav.MAV_MISSION_ACCEPTED
+
+
+def with_type(mission: Mission, mission_type: int, wire: list[MissionItem]) -> Mission:
+    """A copy of ``mission`` whose ``mission_type`` part is the received wire list."""
+    if mission_type == MissionType.MISSION:
+        home = home_from_item(wire[0]) if wire else None
+        return replace(mission, items=list(wire[1:]), home=home)
+    if mission_type == MissionType.FENCE:
+        return replace(mission, fence=list(wire))
+    return replace(mission, rally=list(wire))
+
+
+def cleared(mission: Mission, mission_type: int) -> Mission:
+    if mission_type == MISSION_TYPE_ALL:
+        return Mission(home=mission.home)
+    if mission_type == MissionType.MISSION:
+        return replace(mission, items=[])
+    return with_type(mission, mission_type, [])
+
+
+@dataclass
+class _Upload:
+    sender: Sender
+    mission_type: int
+    count: int
+    received: list[MissionItem] = field(default_factory=list)
+    last_request_s: float = 0.0
+    last_progress_s: float = 0.0
+
+
+@dataclass
+class _Completed:
+    """The last finished upload, to repeat its ACK if the sender did not get it."""
+
+    sender: Sender
+    mission_type: int
+    count: int
+    result: int
+
+
+class MissionService:
+    """Vehicle side of the mission protocol (see the module docstring).
+
+    ``commit(mission)`` is called with the complete new mission before an upload or clear is
+    acknowledged (raise to refuse it); ``set_current(seq) -> bool`` asks the executor to jump to
+    wire seq ``seq``. ``system_id``/``component_id`` are ours: messages addressed to another
+    system or component are ignored.
+    """
+
+    HANDLED = frozenset(
+        {
+            "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST",
+            "MISSION_REQUEST_LIST", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "MISSION_ACK",
+        }
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        mission: Mission | None = None,
+        params: GcsParams | None = None,
+        commit: Callable[[Mission], None] | None = None,
+        set_current: Callable[[int], bool] | None = None,
+    ) -> None:
+        self.mission = mission if mission is not None else Mission()
+        self.params = params or GcsParams()
+        self.vehicle_home: Home | None = None
+        """The daemon's real home; reported at seq 0 of a download when set."""
+        self.current_seq = 0
+        self._commit = commit or (lambda mission: None)
+        self._set_current = set_current or (lambda seq: True)
+        self._upload: _Upload | None = None
+        self._completed: _Completed | None = None
+
+    @property
+    def uploading(self) -> bool:
+        return self._upload is not None
+
+    def count(self, mission_type: int) -> int:
+        """Number of wire items of ``mission_type`` (MISSION counts home)."""
+        return len(wire_items(self.mission, mission_type, self.vehicle_home))
+
+    # ---------------------------------------------------------------- input
+
+    def handle(self, msg, now_s: float) -> list:
+        """Process one received message; return the replies."""
+        kind = msg.get_type()
+        if kind not in self.HANDLED or not self._for_us(msg):
+            return []
+        sender = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "MISSION_COUNT":
+            return self._on_count(msg, sender, now_s)
+        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+            return self._on_item(msg, sender, now_s)
+        if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            return self._on_request(msg, sender)
+        if kind == "MISSION_REQUEST_LIST":
+            return [mav.MAVLink_mission_count_message(*sender, self.count(msg.mission_type), msg.mission_type)]
+        if kind == "MISSION_CLEAR_ALL":
+            return self._on_clear(msg, sender)
+        if kind == "MISSION_SET_CURRENT":
+            return self._on_set_current(msg.seq, sender)
+        return []  # MISSION_ACK: the end of a download, nothing to do
+
+    def tick(self, now_s: float) -> list:
+        """Re-request a missing item, or cancel an upload that stopped making progress."""
+        up = self._upload
+        if up is None:
+            return []
+        if now_s - up.last_progress_s >= self.params.mission_upload_timeout_s:
+            self._upload = None
+            return [self._ack(up.sender, mav.MAV_MISSION_OPERATION_CANCELLED, up.mission_type)]
+        if now_s - up.last_request_s >= self.params.mission_item_retry_s:
+            return [self._request(up, now_s)]
+        return []
+
+    # ---------------------------------------------------------------- daemon side
+
+    def set_current(self, seq: int) -> None:
+        """The executor moved to wire seq ``seq``."""
+        self.current_seq = seq
+
+    def mission_current(self, mission_state: int = 0):
+        """MISSION_CURRENT broadcast: current wire seq and the number of items after home."""
+        return mav.MAVLink_mission_current_message(self.current_seq, len(self.mission.items), mission_state, 0)
+
+    @staticmethod
+    def item_reached(seq: int):
+        return mav.MAVLink_mission_item_reached_message(seq)
+
+    # ---------------------------------------------------------------- handlers
+
+    def _for_us(self, msg) -> bool:
+        target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
+        components = (0, self.params.component_id, MAV_COMP_ID_MISSIONPLANNER)
+        return target[0] in (0, self.params.system_id) and target[1] in components
+
+    def _ack(self, target: Sender, result: int, mission_type: int):
+        return mav.MAVLink_mission_ack_message(target[0], target[1], result, mission_type)
+
+    def _request(self, up: _Upload, now_s: float):
+        up.last_request_s = now_s
+        return mav.MAVLink_mission_request_int_message(*up.sender, len(up.received), up.mission_type)
+
+    def _busy_for(self, sender: Sender) -> bool:
+        return self._upload is not None and self._upload.sender != sender
+
+    def _on_count(self, msg, sender: Sender, now_s: float) -> list:
+        mission_type = msg.mission_type
+        if self._busy_for(sender):
+            return [self._ack(sender, mav.MAV_MISSION_DENIED, mission_type)]
+        self._upload = None  # a repeated COUNT from the uploader restarts
+        if mission_type not in tuple(MissionType):
+            return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, mission_type)]
+        if msg.count > self.params.mission_max_items:
+            return [self._ack(sender, mav.MAV_MISSION_NO_SPACE, mission_type)]
+        if msg.count == 0:
+            return [self._finish(sender, mission_type, [], 0)]
+        self._upload = _Upload(sender, mission_type, msg.count, last_progress_s=now_s)
+        return [self._request(self._upload, now_s)]
+
+    def _on_item(self, msg, sender: Sender, now_s: float) -> list:
+        up = self._upload
+        if up is None:
+            done = self._completed
+            if done and done.sender == sender and done.mission_type == msg.mission_type and msg.seq == done.count - 1:
+                return [self._ack(sender, done.result, done.mission_type)]
+            return []
+        if up.sender != sender:
+            return [self._ack(sender, mav.MAV_MISSION_DENIED, msg.mission_type)]
+        if msg.mission_type != up.mission_type:
+            return []  # a stray item of another list: the pending request stands
+        expected = len(up.received)
+        if msg.seq < expected:
+            return []  # duplicate
+        if msg.seq > expected:
+            return [self._request(up, now_s)]
+        item = item_from_message(msg)
+        result = check_item(item, up.mission_type)
+        if result != mav.MAV_MISSION_ACCEPTED:
+            self._upload = None
+            return [self._ack(sender, result, up.mission_type)]
+        up.received.append(item)
+        up.last_progress_s = now_s
+        if len(up.received) < up.count:
+            return [self._request(up, now_s)]
+        self._upload = None
+        return [self._finish(sender, up.mission_type, up.received, up.count)]
+
+    def _finish(self, sender: Sender, mission_type: int, wire: list[MissionItem], count: int):
+        """Commit a complete upload (or an empty one) and build its ACK."""
+        result = self._store(with_type(self.mission, mission_type, wire))
+        self._completed = _Completed(sender, mission_type, count, result)
+        return self._ack(sender, result, mission_type)
+
+    def _store(self, new: Mission) -> int:
+        try:
+            self._commit(new)
+        except Exception:  # the shell could not persist it: refuse, keep the old mission
+            return mav.MAV_MISSION_ERROR
+        self.mission = new
+        return mav.MAV_MISSION_ACCEPTED
+
+    def _on_request(self, msg, sender: Sender) -> list:
+        wire = wire_items(self.mission, msg.mission_type, self.vehicle_home) if msg.mission_type in tuple(MissionType) else []
+        if not 0 <= msg.seq < len(wire):
+            return [self._ack(sender, mav.MAV_MISSION_INVALID_SEQUENCE, msg.mission_type)]
+        current = msg.mission_type == MissionType.MISSION and msg.seq == self.current_seq
+        return [item_message(wire[msg.seq], msg.seq, msg.mission_type, sender, current)]
+
+    def _on_clear(self, msg, sender: Sender) -> list:
+        if self._busy_for(sender):
+            return [self._ack(sender, mav.MAV_MISSION_DENIED, msg.mission_type)]
+        if msg.mission_type not in (*tuple(MissionType), MISSION_TYPE_ALL):
+            return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
+        self._upload = None
+        return [self._ack(sender, self._store(cleared(self.mission, msg.mission_type)), msg.mission_type)]
+
+    def _on_set_current(self, seq: int, sender: Sender) -> list:
+        if not 0 < seq < self.count(MissionType.MISSION) or not self._set_current(seq):
+            text = f"Mission seq {seq} cannot be made current (mission has {len(self.mission.items)} items)"
+            return [mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, text.encode()[:50], 0, 0)]
+        self.current_seq = seq
+        return [self.mission_current()]
