@@ -1,0 +1,392 @@
+"""The vehicle link: the daemon's MAVLink connection to the rover (or ``rover-sitl``).
+
+It owns one pymavlink connection (serial, udp or tcp connection string) and does four jobs:
+
+* identify itself as a ground station (HEARTBEAT as MAV_TYPE_GCS with the system id the vehicle
+  accepts RC overrides from, SYSID_MYGCS = 255 by default) and find the vehicle's heartbeat;
+* ask for the message rates the daemon needs: SET_MESSAGE_INTERVAL per message, and
+  REQUEST_DATA_STREAM(EXTRA1) because ArduPilot only sends WHEEL_DISTANCE in that stream;
+* decode what arrives into typed items (``rover_ctl.readings`` for sensors, the small classes
+  below for the rest); frames that fail to parse are counted and dropped;
+* send commands: COMMAND_LONG with COMMAND_ACK (asynchronous with retries, or blocking for
+  start-up), RC_CHANNELS_OVERRIDE and the lockstep TIMESYNC answers.
+
+SIMSTATE (the emulator's ground truth) is decoded into ``Truth`` for evaluation only; the daemon
+never navigates on it. Times in decoded items are vehicle time; the wall clock is used only for
+link housekeeping (heartbeats, command retries, silence detection).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from rover_ctl.config import LinkParams  # noqa: E402
+from rover_ctl.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
+
+mavlink = mavutil.mavlink
+
+UINT16_MAX = 65535
+RC_RELEASE = 0
+"""RC_CHANNELS_OVERRIDE channels 1-8: 0 hands the channel back to the radio, UINT16_MAX leaves it."""
+RANGE_CAPPED_CM = 65535
+"""What rangefinders report for "nothing seen"; 0 is also used while a sensor starts."""
+
+# ArduPilot Rover's custom modes (ROVER_MODE_*).
+MODE_MANUAL = 0
+MODE_HOLD = 4
+
+
+class LinkError(RuntimeError):
+    """The vehicle link cannot do what was asked (no vehicle, command refused or unanswered)."""
+
+
+@dataclass(frozen=True)
+class VehicleStatus:
+    """The vehicle's HEARTBEAT."""
+
+    wall_s: float
+    armed: bool
+    custom_mode: int
+    system_status: int
+
+
+@dataclass(frozen=True)
+class Truth:
+    """SIMSTATE ground truth (evaluation only). ``time_s`` is the link's vehicle time at receipt."""
+
+    time_s: float
+    lat_deg: float
+    lon_deg: float
+    yaw_rad: float
+    """NED: 0 north, clockwise positive."""
+
+
+@dataclass(frozen=True)
+class FrameMarker:
+    """A lockstep end-of-frame marker: TIMESYNC with tc1 == 0 from the vehicle."""
+
+    time_s: float
+    ts1_ns: int
+
+
+@dataclass(frozen=True)
+class StatusText:
+    time_s: float
+    severity: int
+    text: str
+
+
+@dataclass(frozen=True)
+class ServoOutput:
+    """SERVO_OUTPUT_RAW: the vehicle's mixed motor PWM (servo1 left, servo3 right)."""
+
+    time_s: float
+    left_us: int
+    right_us: int
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    command: int
+    result: int
+    """MAV_RESULT, or -1 when no ACK came after all retries."""
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == mavlink.MAV_RESULT_ACCEPTED
+
+
+def decode_range(msg: Any, time_s: float) -> RangeReading:
+    """DISTANCE_SENSOR -> RangeReading; 0, the 65535 cap and readings above max mean +inf."""
+    current = msg.current_distance
+    if current == 0 or current >= RANGE_CAPPED_CM or (msg.max_distance and current > msg.max_distance):
+        range_m = math.inf
+    else:
+        range_m = current / 100.0
+    return RangeReading(
+        time_s=time_s,
+        sensor_id=msg.id,
+        orientation=msg.orientation,
+        range_m=range_m,
+        min_range_m=msg.min_distance / 100.0,
+        max_range_m=msg.max_distance / 100.0,
+    )
+
+
+def decode_gps(msg: Any) -> GpsFix:
+    def unknown16(value: int, scale: float) -> float:
+        return math.nan if value == UINT16_MAX else value * scale
+
+    return GpsFix(
+        time_s=msg.time_usec / 1e6,
+        lat_deg=msg.lat / 1e7,
+        lon_deg=msg.lon / 1e7,
+        alt_m=msg.alt / 1000.0,
+        fix_type=msg.fix_type,
+        eph_m=unknown16(msg.eph, 0.01),
+        speed_mps=unknown16(msg.vel, 0.01),
+        course_deg=unknown16(msg.cog, 0.01),
+        satellites=msg.satellites_visible,
+    )
+
+
+@dataclass
+class _Pending:
+    command: int
+    params: tuple[float, ...]
+    sent_wall_s: float
+    attempts: int
+    on_result: Callable[[CommandResult], None] | None
+
+
+class VehicleLink:
+    """One MAVLink connection to the vehicle. Non-blocking except ``wait_vehicle`` and ``command``.
+
+    ``poll()`` returns the decoded items received since the last call, in arrival order.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        params: LinkParams,
+        *,
+        command_timeout_s: float = 0.5,
+        command_retries: int = 3,
+        conn: Any = None,
+        wall: Callable[[], float] = time.monotonic,
+    ):
+        self.params = params
+        self.command_timeout_s = command_timeout_s
+        self.command_retries = command_retries
+        self._wall = wall
+        try:
+            self.conn = conn or mavutil.mavlink_connection(
+                url,
+                source_system=params.source_system,
+                source_component=params.source_component,
+                dialect="ardupilotmega",
+                autoreconnect=True,
+            )
+        except Exception as exc:  # pymavlink raises bare OSError/SerialException/ValueError
+            raise LinkError(f"vehicle link {url!r}: cannot open: {exc}") from None
+        self.url = url
+        self.target_system = 1
+        self.target_component = 1
+        self.vehicle: VehicleStatus | None = None
+        self.last_rx_wall_s: float | None = None
+        self.vehicle_time_s = 0.0
+        """Latest vehicle timestamp seen (sensor clock)."""
+        self.frames_received = 0
+        self.garbage_frames = 0
+        self._next_heartbeat_s = 0.0
+        self._pending: dict[int, _Pending] = {}
+        self._held: list[Any] = []
+
+    # ---- receiving -------------------------------------------------------------------------
+
+    def fileno(self) -> int | None:
+        return getattr(self.conn, "fd", None)
+
+    def wait_readable(self, timeout_s: float) -> None:
+        """Block until the link has bytes or ``timeout_s`` (wall) passes."""
+        self.conn.select(timeout_s)
+
+    def poll(self, max_frames: int = 10_000, stop_at_marker: bool = True) -> list[Any]:
+        """Decoded items received so far (non-blocking). Stops after a lockstep marker when
+        ``stop_at_marker`` so that a frame's control step sees exactly that frame's data."""
+        items, self._held = self._held, []
+        for _ in range(max_frames):
+            try:
+                msg = self.conn.recv_msg()
+            except Exception:  # a frame pymavlink could not unpack
+                self.garbage_frames += 1
+                continue
+            if msg is None:
+                break
+            item = self._decode(msg)
+            if item is not None:
+                items.append(item)
+                if stop_at_marker and isinstance(item, FrameMarker):
+                    break
+        return items
+
+    def _decode(self, msg: Any) -> Any:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            self.garbage_frames += 1
+            return None
+        if msg.get_srcSystem() == self.params.source_system:
+            return None  # our own frames echoed by a broadcast medium
+        self.frames_received += 1
+        self.last_rx_wall_s = self._wall()
+        if kind == "HEARTBEAT":
+            if msg.type == mavlink.MAV_TYPE_GCS:
+                return None
+            self.target_system, self.target_component = msg.get_srcSystem(), msg.get_srcComponent()
+            self.vehicle = VehicleStatus(
+                wall_s=self.last_rx_wall_s,
+                armed=bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED),
+                custom_mode=msg.custom_mode,
+                system_status=msg.system_status,
+            )
+            return self.vehicle
+        if kind == "ATTITUDE":
+            self._advance(msg.time_boot_ms / 1000.0)
+            return Attitude(time_s=msg.time_boot_ms / 1000.0, yaw_rad=msg.yaw, yaw_rate_radps=msg.yawspeed)
+        if kind == "WHEEL_DISTANCE":
+            if msg.count < 2:
+                self.garbage_frames += 1
+                return None
+            self._advance(msg.time_usec / 1e6)
+            return WheelDistance(time_s=msg.time_usec / 1e6, left_m=msg.distance[0], right_m=msg.distance[1])
+        if kind == "GPS_RAW_INT":
+            self._advance(msg.time_usec / 1e6)
+            return decode_gps(msg)
+        if kind == "DISTANCE_SENSOR":
+            self._advance(msg.time_boot_ms / 1000.0)
+            return decode_range(msg, msg.time_boot_ms / 1000.0)
+        if kind == "TIMESYNC":
+            if msg.tc1 == 0:
+                self._advance(msg.ts1 / 1e9)
+                return FrameMarker(time_s=msg.ts1 / 1e9, ts1_ns=msg.ts1)
+            return None
+        if kind == "SIMSTATE":
+            return Truth(self.vehicle_time_s, msg.lat / 1e7, msg.lng / 1e7, msg.yaw)
+        if kind == "SERVO_OUTPUT_RAW":
+            return ServoOutput(msg.time_usec / 1e6, msg.servo1_raw, msg.servo3_raw)
+        if kind == "STATUSTEXT":
+            return StatusText(self.vehicle_time_s, msg.severity, msg.text)
+        if kind == "COMMAND_ACK":
+            return self._on_ack(msg)
+        return None
+
+    def _advance(self, time_s: float) -> None:
+        if time_s > self.vehicle_time_s:
+            self.vehicle_time_s = time_s
+
+    # ---- sending ---------------------------------------------------------------------------
+
+    def tick(self) -> None:
+        """Housekeeping, call every loop turn: our heartbeat and command retries (wall clock)."""
+        now = self._wall()
+        if now >= self._next_heartbeat_s:
+            self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE)
+            self._next_heartbeat_s = now + self.params.heartbeat_period_s
+        for pending in list(self._pending.values()):
+            if now - pending.sent_wall_s < self.command_timeout_s:
+                continue
+            if pending.attempts > self.command_retries:
+                del self._pending[pending.command]
+                if pending.on_result:
+                    pending.on_result(CommandResult(pending.command, -1))
+                continue
+            self._send_command(pending, now)
+
+    def send_override(self, steering_us: int, throttle_us: int) -> None:
+        """RC_CHANNELS_OVERRIDE: ch1 steering, ch3 throttle; the other channels released."""
+        r = RC_RELEASE
+        self.conn.mav.rc_channels_override_send(
+            self.target_system, self.target_component, int(steering_us), r, int(throttle_us), r, r, r, r, r
+        )
+
+    def release_override(self) -> None:
+        """Hand every channel back to the radio (MANUAL pass-through)."""
+        r = RC_RELEASE
+        self.conn.mav.rc_channels_override_send(self.target_system, self.target_component, r, r, r, r, r, r, r, r)
+
+    def answer_marker(self, marker: FrameMarker) -> None:
+        """Answer a lockstep marker: the vehicle may advance to the next frame."""
+        self.conn.mav.timesync_send(int(self._wall() * 1e9), marker.ts1_ns)
+
+    def request_streams(self, rates_hz: dict[str, float], extra1_hz: float) -> None:
+        """Ask for message rates (fire and forget: the vehicle sends what it can, we cope)."""
+        for name, hz in rates_hz.items():
+            msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+            self.command_async(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+        self.conn.mav.request_data_stream_send(
+            self.target_system, self.target_component, mavlink.MAV_DATA_STREAM_EXTRA1, int(round(extra1_hz)), 1
+        )
+
+    def param_set(self, name: str, value: float) -> None:
+        self.conn.mav.param_set_send(
+            self.target_system, self.target_component, name.encode(), float(value), mavlink.MAV_PARAM_TYPE_REAL32
+        )
+
+    def command_async(self, command: int, *params: float, on_result: Callable[[CommandResult], None] | None = None) -> None:
+        """Send COMMAND_LONG; retried by ``tick`` until acknowledged; ``on_result`` gets the outcome.
+        A newer request for the same command replaces an unanswered older one."""
+        pending = _Pending(command, tuple(params) + (0.0,) * (7 - len(params)), 0.0, 0, on_result)
+        self._pending[command] = pending
+        self._send_command(pending, self._wall())
+
+    def _send_command(self, pending: _Pending, now: float) -> None:
+        self.conn.mav.command_long_send(
+            self.target_system, self.target_component, pending.command, pending.attempts, *pending.params
+        )
+        pending.attempts += 1
+        pending.sent_wall_s = now
+
+    def _on_ack(self, msg: Any) -> CommandResult | None:
+        pending = self._pending.get(msg.command)
+        if pending is None or msg.result == mavlink.MAV_RESULT_IN_PROGRESS:
+            return None
+        del self._pending[msg.command]
+        result = CommandResult(msg.command, msg.result)
+        if pending.on_result:
+            pending.on_result(result)
+        return result
+
+    def arm_async(self, arm: bool, on_result: Callable[[CommandResult], None] | None = None) -> None:
+        self.command_async(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if arm else 0.0, on_result=on_result)
+
+    def set_mode_async(self, custom_mode: int, on_result: Callable[[CommandResult], None] | None = None) -> None:
+        self.command_async(
+            mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, float(custom_mode), on_result=on_result
+        )
+
+    # ---- blocking helpers for start-up ---------------------------------------------------------
+
+    def wait_vehicle(self, timeout_s: float) -> VehicleStatus:
+        """Heartbeat until the vehicle's heartbeat arrives; lockstep markers are answered meanwhile
+        (nothing is being commanded yet). Decoded items are kept for the next ``poll``."""
+        deadline = self._wall() + timeout_s
+        while self.vehicle is None:
+            if self._wall() > deadline:
+                raise LinkError(f"vehicle link {self.url}: no vehicle heartbeat within {timeout_s:g} s")
+            self._pump(0.05)
+        return self.vehicle
+
+    def command(self, command: int, *params: float, timeout_s: float | None = None) -> CommandResult:
+        """COMMAND_LONG and wait (wall clock) for its ACK, retrying; markers are answered meanwhile."""
+        results: list[CommandResult] = []
+        self.command_async(command, *params, on_result=results.append)
+        limit = timeout_s or self.command_timeout_s * (self.command_retries + 1) + 1.0
+        deadline = self._wall() + limit
+        while not results:
+            if self._wall() > deadline:
+                self._pending.pop(command, None)
+                return CommandResult(command, -1)
+            self._pump(0.02)
+        return results[0]
+
+    def _pump(self, wait_s: float) -> None:
+        self.tick()
+        self.wait_readable(wait_s)
+        for item in self.poll(stop_at_marker=False):
+            if isinstance(item, FrameMarker):
+                self.answer_marker(item)
+            else:
+                self._held.append(item)
+
+    def close(self) -> None:
+        try:
+            self.conn.close()
+        except OSError:
+            pass

@@ -1,0 +1,155 @@
+"""Wheel-speed control: left/right wheel rpm setpoints -> RC steering/throttle PWM.
+
+Pure (no I/O, no clock: the caller passes the vehicle-time step). Three pieces:
+
+``WheelSpeedMeter``
+    wheel speeds from WHEEL_DISTANCE deltas, ``rpm = 60 * (d_m / dt_s) / (2 pi r)``, smoothed by a
+    first-order low-pass with time constant ``speed_filter_tau_s``.
+``WheelController``
+    per wheel a PI loop with feed-forward on the motor output ``u`` in [-1, 1]:
+    ``u = rpm_set / full_output_rpm + kp e + I``, ``I += ki e dt`` only while that does not push a
+    saturated output further (conditional-integration anti-windup), ``|I| <= integral_limit``.
+    Without a fresh measurement it runs on feed-forward alone.
+``motors_to_rc`` / ``rc_to_motors``
+    the inverse of ArduPilot's skid-steer mixer (AP_MotorsUGV::output_skid_steering) and the mixer
+    itself for checking. The vehicle reads steering s and throttle t in [-1, 1] from PWM with a
+    dead zone of ``dz`` around trim, ``x = (|pwm - trim| - dz) / (range - dz)``, truncated to its
+    integer units (centidegrees of 4500 for steering, percent for throttle); when
+    ``|s| + |t| > 1`` both are scaled by ``1 / (|s| + |t|)`` (MOT_STR_THR_MIX = 0.5); then
+    ``left = t + s``, ``right = t - s``. The inverse is ``t = (l + r) / 2``, ``s = (l - r) / 2``;
+    with ``|l|, |r| <= 1`` it follows ``|s| + |t| = max(|l|, |r|) <= 1``, so the vehicle never
+    saturates what we send.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rover_ctl.config import WheelControlParams
+from rover_ctl.readings import WheelDistance
+
+STEERING_UNITS = 4500
+"""ArduPilot's steering control_in full scale (centidegrees)."""
+THROTTLE_UNITS = 100
+"""ArduPilot's throttle control_in full scale (percent)."""
+
+
+def _to_pwm(x: float, params: WheelControlParams) -> int:
+    """Normalised input in [-1, 1] -> PWM that the vehicle's dead-zoned RC input reads as ``x``."""
+    x = max(-1.0, min(1.0, x))
+    if x == 0.0:
+        return params.rc_trim_us
+    span = params.rc_range_us - params.rc_deadzone_us
+    return params.rc_trim_us + int(math.copysign(round(params.rc_deadzone_us + abs(x) * span), x))
+
+
+def _from_pwm(pwm: int, units: int, params: WheelControlParams) -> float:
+    """The vehicle's reading of a PWM value: dead zone around trim, integer control units."""
+    offset = pwm - params.rc_trim_us
+    if abs(offset) <= params.rc_deadzone_us:
+        return 0.0
+    span = params.rc_range_us - params.rc_deadzone_us
+    magnitude = min(abs(offset), params.rc_range_us) - params.rc_deadzone_us
+    return math.copysign(int(units * magnitude / span) / units, offset)
+
+
+def motors_to_rc(left: float, right: float, params: WheelControlParams) -> tuple[int, int]:
+    """Motor outputs ``left, right`` in [-1, 1] -> (steering_us, throttle_us) for RC ch1 and ch3."""
+    left = max(-1.0, min(1.0, left))
+    right = max(-1.0, min(1.0, right))
+    return _to_pwm((left - right) / 2.0, params), _to_pwm((left + right) / 2.0, params)
+
+
+def rc_to_motors(steering_us: int, throttle_us: int, params: WheelControlParams) -> tuple[float, float]:
+    """ArduPilot's skid-steer mixer (MANUAL mode, MOT_STR_THR_MIX 0.5): PWM in -> motor outputs."""
+    steering = _from_pwm(steering_us, STEERING_UNITS, params)
+    throttle = _from_pwm(throttle_us, THROTTLE_UNITS, params)
+    saturation = abs(steering) + abs(throttle)
+    if saturation > 1.0:
+        steering /= saturation
+        throttle = math.copysign(min(abs(throttle), 1.0 - abs(steering)), throttle)
+    return throttle + steering, throttle - steering
+
+
+class WheelSpeedMeter:
+    """Low-passed wheel speeds (rpm) from cumulative WHEEL_DISTANCE readings."""
+
+    def __init__(self, wheel_radius_m: float, params: WheelControlParams):
+        self._radius_m = wheel_radius_m
+        self._tau_s = params.speed_filter_tau_s
+        self._last: WheelDistance | None = None
+        self.left_rpm = 0.0
+        self.right_rpm = 0.0
+        self.time_s: float | None = None
+        """Vehicle time of the latest reading used, None before two readings."""
+
+    def update(self, reading: WheelDistance) -> None:
+        last, self._last = self._last, reading
+        if last is None:
+            return
+        dt_s = reading.time_s - last.time_s
+        if dt_s <= 0.0:
+            self._last = last  # a repeated or out-of-order reading carries no speed
+            return
+        to_rpm = 60.0 / (2.0 * math.pi * self._radius_m * dt_s)
+        alpha = dt_s / (self._tau_s + dt_s)
+        self.left_rpm += alpha * ((reading.left_m - last.left_m) * to_rpm - self.left_rpm)
+        self.right_rpm += alpha * ((reading.right_m - last.right_m) * to_rpm - self.right_rpm)
+        self.time_s = reading.time_s
+
+
+@dataclass(frozen=True)
+class WheelCommand:
+    steering_us: int
+    throttle_us: int
+    left_out: float
+    right_out: float
+    """Motor outputs in [-1, 1] before mixing."""
+
+
+class _PiWheel:
+    def __init__(self, params: WheelControlParams):
+        self.params = params
+        self.integral = 0.0
+
+    def step(self, setpoint_rpm: float, measured_rpm: float | None, dt_s: float) -> float:
+        p = self.params
+        feed_forward = setpoint_rpm / p.full_output_rpm
+        if measured_rpm is None:
+            return max(-1.0, min(1.0, feed_forward))
+        error = setpoint_rpm - measured_rpm
+        unclamped = feed_forward + p.kp * error + self.integral
+        saturated_same_way = abs(unclamped) >= 1.0 and math.copysign(1.0, unclamped) == math.copysign(1.0, error)
+        if not saturated_same_way:
+            self.integral = max(-p.integral_limit, min(p.integral_limit, self.integral + p.ki * error * dt_s))
+        return max(-1.0, min(1.0, feed_forward + p.kp * error + self.integral))
+
+
+class WheelController:
+    """Closes the left and right wheel speeds; output mixed into RC PWM."""
+
+    def __init__(self, wheel_radius_m: float, params: WheelControlParams):
+        self.params = params
+        self.meter = WheelSpeedMeter(wheel_radius_m, params)
+        self._left = _PiWheel(params)
+        self._right = _PiWheel(params)
+
+    def on_wheels(self, reading: WheelDistance) -> None:
+        self.meter.update(reading)
+
+    def reset(self) -> None:
+        """Forget the integrators (on hold, mode change or failsafe)."""
+        self._left.integral = self._right.integral = 0.0
+
+    def neutral(self) -> WheelCommand:
+        self.reset()
+        return WheelCommand(self.params.rc_trim_us, self.params.rc_trim_us, 0.0, 0.0)
+
+    def step(self, time_s: float, dt_s: float, left_rpm: float, right_rpm: float) -> WheelCommand:
+        """One control step at vehicle time ``time_s`` lasting ``dt_s``."""
+        fresh = self.meter.time_s is not None and time_s - self.meter.time_s <= self.params.measurement_timeout_s
+        left = self._left.step(left_rpm, self.meter.left_rpm if fresh else None, dt_s)
+        right = self._right.step(right_rpm, self.meter.right_rpm if fresh else None, dt_s)
+        steering_us, throttle_us = motors_to_rc(left, right, self.params)
+        return WheelCommand(steering_us, throttle_us, left, right)
