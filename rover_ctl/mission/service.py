@@ -20,7 +20,7 @@ Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemPro
   the upload is cancelled (MAV_MISSION_OPERATION_CANCELLED) and the stored mission is untouched.
   If the final ACK is lost and the sender repeats the last item, the ACK is repeated.
 * Atomicity: received items go to a scratch list. Only a complete, valid upload is passed to
-  ``commit(new_mission)`` (the shell persists it there); if ``commit`` raises, the upload is
+  ``commit(new_mission, mission_type)`` (the shell persists it there); if ``commit`` raises, the upload is
   refused with MAV_MISSION_ERROR and the stored mission stays the old one.
 * Download: MISSION_REQUEST_LIST -> MISSION_COUNT; every MISSION_REQUEST_INT or legacy
   MISSION_REQUEST in range is answered with MISSION_ITEM_INT (stateless, so lost requests are
@@ -175,8 +175,8 @@ class _Completed:
 class MissionService:
     """Vehicle side of the mission protocol (see the module docstring).
 
-    ``commit(mission)`` is called with the complete new mission before an upload or clear is
-    acknowledged (raise to refuse it); ``set_current(seq) -> bool`` asks the executor to jump to
+    ``commit(mission, mission_type)`` is called with the complete new mission before an upload or
+    clear of ``mission_type`` (255 for all) is acknowledged (raise to refuse it); ``set_current(seq) -> bool`` asks the executor to jump to
     wire seq ``seq``. ``system_id``/``component_id`` are ours: messages addressed to another
     system or component are ignored.
     """
@@ -192,7 +192,7 @@ class MissionService:
         self,
         mission: Mission | None = None,
         params: GcsParams | None = None,
-        commit: Callable[[Mission], None] | None = None,
+        commit: Callable[[Mission, int], None] | None = None,
         set_current: Callable[[int], bool] | None = None,
     ) -> None:
         self.mission = mission if mission is not None else Mission()
@@ -200,7 +200,7 @@ class MissionService:
         self.vehicle_home: Home | None = None
         """The daemon's real home; reported at seq 0 of a download when set."""
         self.current_seq = 0
-        self._commit = commit or (lambda mission: None)
+        self._commit = commit or (lambda mission, mission_type: None)
         self._set_current = set_current or (lambda seq: True)
         self._upload: _Upload | None = None
         self._completed: _Completed | None = None
@@ -322,13 +322,13 @@ class MissionService:
 
     def _finish(self, sender: Sender, mission_type: int, wire: list[MissionItem], count: int):
         """Commit a complete upload (or an empty one) and build its ACK."""
-        result = self._store(with_type(self.mission, mission_type, wire))
+        result = self._store(with_type(self.mission, mission_type, wire), mission_type)
         self._completed = _Completed(sender, mission_type, count, result)
         return self._ack(sender, result, mission_type)
 
-    def _store(self, new: Mission) -> int:
+    def _store(self, new: Mission, mission_type: int) -> int:
         try:
-            self._commit(new)
+            self._commit(new, mission_type)
         except Exception:  # the shell could not persist it: refuse, keep the old mission
             return mav.MAV_MISSION_ERROR
         self.mission = new
@@ -347,7 +347,7 @@ class MissionService:
         if msg.mission_type not in (*tuple(MissionType), MISSION_TYPE_ALL):
             return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
         self._upload = None
-        return [self._ack(sender, self._store(cleared(self.mission, msg.mission_type)), msg.mission_type)]
+        return [self._ack(sender, self._store(cleared(self.mission, msg.mission_type), msg.mission_type), msg.mission_type)]
 
     def _on_set_current(self, seq: int, sender: Sender) -> list:
         if not 0 < seq < self.count(MissionType.MISSION) or not self._set_current(seq):

@@ -1,0 +1,113 @@
+"""Persistence of the vehicle's current mission, fence and rally points.
+
+The store is one JSON file holding the model losslessly (floats as JSON numbers; NaN params as
+Python's json writes them). ``save`` is atomic: write a temporary file in the same directory,
+fsync it, rename it over the store, fsync the directory; a crash leaves either the old or the new
+file, never a torn one. ``load`` of a missing file is an empty mission; a file that cannot be read
+raises ``StoreError`` naming the file and the problem, and ``quarantine`` moves it aside
+(``<name>.corrupt``, ``<name>.corrupt.1``, ...) so it is never silently overwritten.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from rover_ctl.mission.model import Home, Mission, MissionItem
+
+FORMAT = "rover_ctl-mission-store"
+VERSION = 1
+
+
+class StoreError(ValueError):
+    """The store file is unreadable or not a mission store; the message names it."""
+
+
+def to_json(mission: Mission) -> dict[str, Any]:
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "home": dataclasses.asdict(mission.home) if mission.home else None,
+        "items": [dataclasses.asdict(i) for i in mission.items],
+        "fence": [dataclasses.asdict(i) for i in mission.fence],
+        "rally": [dataclasses.asdict(i) for i in mission.rally],
+    }
+
+
+def from_json(data: Any, where: str) -> Mission:
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise StoreError(f"{where}: not a rover_ctl mission store (no \"format\": \"{FORMAT}\")")
+    if data.get("version") != VERSION:
+        raise StoreError(f"{where}: unsupported store version {data.get('version')!r} (expected {VERSION})")
+
+    def items(key: str) -> list[MissionItem]:
+        rows = data.get(key)
+        if not isinstance(rows, list):
+            raise StoreError(f"{where}: \"{key}\" must be a list")
+        out = []
+        for index, row in enumerate(rows):
+            try:
+                out.append(MissionItem(**row))
+            except TypeError as exc:
+                raise StoreError(f"{where}: {key}[{index}]: {exc}") from None
+        return out
+
+    home = data.get("home")
+    try:
+        home = Home(**home) if home is not None else None
+    except TypeError as exc:
+        raise StoreError(f"{where}: home: {exc}") from None
+    return Mission(items=items("items"), home=home, fence=items("fence"), rally=items("rally"))
+
+
+class MissionStore:
+    """The store file at ``path`` (``~`` expanded; parent directories created on save)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path).expanduser()
+
+    def load(self) -> Mission:
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return Mission()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise StoreError(f"{self.path}: cannot read mission store: {exc}") from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise StoreError(f"{self.path}: corrupt mission store: {exc}") from None
+        return from_json(data, str(self.path))
+
+    def save(self, mission: Mission) -> None:
+        """Atomically replace the store with ``mission`` (raises OSError if it cannot)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(to_json(mission), fh, indent=1)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        dir_fd = os.open(self.path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+
+    def quarantine(self) -> Path:
+        """Move an unreadable store aside and return where it went."""
+        target = self.path.with_name(self.path.name + ".corrupt")
+        n = 0
+        while target.exists():
+            n += 1
+            target = self.path.with_name(f"{self.path.name}.corrupt.{n}")
+        os.replace(self.path, target)
+        return target
