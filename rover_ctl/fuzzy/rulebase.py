@@ -1,0 +1,236 @@
+"""A Mamdani rule base compiled to a consequent table over the grid of input-set combinations.
+
+Inference: a rule's strength is the AND (``min`` or ``product``) of its antecedent memberships;
+an output set's strength is the max over the rules concluding it; the defuzzifier
+(``rover_ctl.fuzzy.defuzzify``) turns set strengths into a crisp value. When no rule fires for an
+output, the output is its variable's ``default`` (never NaN, never an exception).
+
+An input a rule does not mention means "any set of that input": the rule stands for one cell per
+set of that input (the expansion a complete rule table would spell out), so its strength there is
+``AND(its antecedents, membership of that input's set)``. The rule base therefore compiles to
+one table ``consequent[output][cell]`` over the cells ``(set of input 1, ..., set of input n)``,
+with ``-1`` where no rule concludes that output. Two rules concluding different sets of one output
+in the same cell conflict and are refused when the rule base is built.
+
+Compiled evaluation uses sparsity: at any point of a universe made of overlapping
+piecewise-linear sets only a few sets (``Variable.max_active()``, 2 for a usual partition) are
+non-zero, so a row fires at most ``prod(max_active)`` cells (64 for the paper's six inputs)
+instead of all 972; strengths of those cells are an outer AND of per-input vectors, their
+consequents a table look-up, and the per-set max a scatter-max (``np.maximum.at``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rover_ctl.fuzzy.defuzzify import DEFUZZIFIERS
+from rover_ctl.fuzzy.membership import Variable
+
+ROWS_PER_CHUNK = 32768
+"""Rows evaluated at once in batch: about 2 kB of temporaries per row for the paper's base."""
+
+
+class RuleBaseError(ValueError):
+    """A rule base that cannot be used; the message names the file and the rule."""
+
+
+@dataclass(frozen=True)
+class Rule:
+    """One rule: a set index per input (None = any) and per output (None = no conclusion)."""
+
+    antecedent: tuple[int | None, ...]
+    consequent: tuple[int | None, ...]
+    text: str
+    where: str
+    """Where it was read, e.g. ``paper.toml rule 12``, for error messages."""
+
+
+@dataclass
+class RuleBase:
+    name: str
+    inputs: tuple[Variable, ...]
+    outputs: tuple[Variable, ...]
+    rules: tuple[Rule, ...]
+    and_method: str = "min"
+    defuzzifier: str = "area_centre"
+    resolution: int = 1001
+    """Samples across an output's range for the sampled defuzzifiers."""
+    description: str = ""
+    source: str = ""
+    warnings: list[str] = field(default_factory=list)
+    """Coverage report: cells where an output has no rule (filled when built)."""
+
+    def __post_init__(self) -> None:
+        if self.and_method not in ("min", "product"):
+            raise RuleBaseError(f"{self.source}: unknown 'and' method {self.and_method!r} (known: min, product)")
+        if self.defuzzifier not in DEFUZZIFIERS:
+            raise RuleBaseError(
+                f"{self.source}: unknown defuzzifier {self.defuzzifier!r} (known: {', '.join(DEFUZZIFIERS)})"
+            )
+        self._defuzz = DEFUZZIFIERS[self.defuzzifier]
+        self._sizes = [len(v.sets) for v in self.inputs]
+        # Row-major strides: cell = sum(set_index_i * stride_i).
+        self._strides = [int(np.prod(self._sizes[i + 1 :], dtype=np.int64)) for i in range(len(self.inputs))]
+        n_cells = int(np.prod(self._sizes, dtype=np.int64))
+        self._table = np.full((len(self.outputs), n_cells), -1, dtype=np.int16)
+        self._cell_rule = np.full(n_cells, -1, dtype=np.int32)
+        owner = np.full((len(self.outputs), n_cells), -1, dtype=np.int32)
+        for index, rule in enumerate(self.rules):
+            cells = self._cells_of(rule.antecedent)
+            self._cell_rule[cells] = np.where(self._cell_rule[cells] < 0, index, self._cell_rule[cells])
+            for o, k in enumerate(rule.consequent):
+                if k is None:
+                    continue
+                clash = cells[(self._table[o, cells] >= 0) & (self._table[o, cells] != k)]
+                if clash.size:
+                    other = self.rules[owner[o, clash[0]]]
+                    raise RuleBaseError(
+                        f"{rule.where}: conflicts with {other.where} on {self.outputs[o].name} "
+                        f"({self.outputs[o].sets[k].name} vs "
+                        f"{self.outputs[o].sets[self._table[o, clash[0]]].name}) at {self.describe_cell(int(clash[0]))}"
+                    )
+                fresh = cells[self._table[o, cells] < 0]
+                self._table[o, fresh] = k
+                owner[o, fresh] = index
+        for o, output in enumerate(self.outputs):
+            missing = np.flatnonzero(self._table[o] < 0)
+            if missing.size:
+                examples = "; ".join(self.describe_cell(int(c)) for c in missing[:3])
+                more = f" and {missing.size - 3} more" if missing.size > 3 else ""
+                self.warnings.append(
+                    f"{self.source}: {missing.size} input combination(s) have no rule for {output.name}: "
+                    f"{examples}{more} (the output falls back on the other rules, or on {output.default:g})"
+                )
+        self._active = [v.max_active() for v in self.inputs]
+        self._table_lists = [row.tolist() for row in self._table]
+        self._n_sets_out = [len(v.sets) for v in self.outputs]
+        points = [np.array([s.points for s in v.sets]) for v in self.outputs]
+        # Paper defuzzifier terms per output set: bottom + core, slopes, peak (pure-Python path).
+        self._area_terms = [
+            [(d - a + c - b, (b - a) + (d - c), (b + c) / 2.0) for a, b, c, d in p] for p in points
+        ]
+
+    # ----- structure -------------------------------------------------------------------------
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(v.name for v in self.inputs)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(v.name for v in self.outputs)
+
+    def _cells_of(self, antecedent: tuple[int | None, ...]) -> np.ndarray:
+        cells = np.zeros(1, dtype=np.int64)
+        for i, choice in enumerate(antecedent):
+            options = np.arange(self._sizes[i]) if choice is None else np.array([choice])
+            cells = (cells[:, None] + options[None, :] * self._strides[i]).ravel()
+        return cells
+
+    def describe_cell(self, cell: int) -> str:
+        parts = []
+        for variable, stride, size in zip(self.inputs, self._strides, self._sizes):
+            parts.append(f"{variable.name}={variable.sets[(cell // stride) % size].name}")
+        return ", ".join(parts)
+
+    # ----- batch -----------------------------------------------------------------------------
+    def evaluate(self, inputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Crisp outputs for arrays of inputs (broadcast together); a dict of output arrays."""
+        missing = [n for n in self.input_names if n not in inputs]
+        if missing:
+            raise RuleBaseError(f"{self.name}: missing input(s) {', '.join(missing)}")
+        arrays = np.broadcast_arrays(*[np.asarray(inputs[n], dtype=np.float64) for n in self.input_names])
+        shape = arrays[0].shape
+        flat = [a.ravel() for a in arrays]
+        rows = flat[0].size
+        result = {v.name: np.empty(rows) for v in self.outputs}
+        for start in range(0, rows, ROWS_PER_CHUNK):
+            chunk = [a[start : start + ROWS_PER_CHUNK] for a in flat]
+            for output, mu in zip(self.outputs, self.set_strengths(chunk)):
+                crisp = self._defuzz(mu, output, self.resolution)
+                result[output.name][start : start + ROWS_PER_CHUNK] = np.where(np.isnan(crisp), output.default, crisp)
+        return {name: values.reshape(shape) for name, values in result.items()}
+
+    def set_strengths(self, columns: list[np.ndarray]) -> list[np.ndarray]:
+        """Per output, the strength of each of its sets: arrays of shape (rows, sets)."""
+        rows = columns[0].size
+        strength = np.ones((rows, 1))
+        cell = np.zeros((rows, 1), dtype=np.int64)
+        for variable, x, active, stride in zip(self.inputs, columns, self._active, self._strides):
+            mu = variable.memberships(x)
+            if active < mu.shape[1]:
+                index = np.argsort(-mu, axis=1, kind="stable")[:, :active]
+                mu = np.take_along_axis(mu, index, axis=1)
+            else:
+                index = np.broadcast_to(np.arange(mu.shape[1]), mu.shape)
+            if self.and_method == "min":
+                strength = np.minimum(strength[:, :, None], mu[:, None, :]).reshape(rows, -1)
+            else:
+                strength = (strength[:, :, None] * mu[:, None, :]).reshape(rows, -1)
+            cell = (cell[:, :, None] + index[:, None, :] * stride).reshape(rows, -1)
+        result = []
+        for table, n_sets in zip(self._table, self._n_sets_out):
+            consequent = table[cell].astype(np.int64)
+            consequent[consequent < 0] = n_sets  # a sink column for "no rule"
+            slots = np.arange(rows)[:, None] * (n_sets + 1) + consequent
+            aggregate = np.zeros(rows * (n_sets + 1))
+            np.maximum.at(aggregate, slots.ravel(), strength.ravel())
+            result.append(aggregate.reshape(rows, n_sets + 1)[:, :n_sets])
+        return result
+
+    # ----- single (control loop) ---------------------------------------------------------------
+    def _fired_cells(self, values: Mapping[str, float]) -> list[tuple[int, float]]:
+        """(cell, strength) of every cell with non-zero strength, in pure Python."""
+        fired = [(0, 1.0)]
+        use_min = self.and_method == "min"
+        for variable, stride in zip(self.inputs, self._strides):
+            try:
+                x = float(values[variable.name])
+            except KeyError:
+                raise RuleBaseError(f"{self.name}: missing input {variable.name}") from None
+            nonzero = [(j * stride, m) for j, m in enumerate(variable.memberships_one(x)) if m > 0.0]
+            if use_min:
+                fired = [(c + offset, s if s < m else m) for c, s in fired for offset, m in nonzero]
+            else:
+                fired = [(c + offset, s * m) for c, s in fired for offset, m in nonzero]
+        return fired
+
+    def evaluate_one(self, **values: float) -> dict[str, float]:
+        """Crisp outputs for one set of inputs through the compiled pure-Python path."""
+        fired = self._fired_cells(values)
+        result = {}
+        for o, output in enumerate(self.outputs):
+            table = self._table_lists[o]
+            mu = [0.0] * self._n_sets_out[o]
+            for cell, s in fired:
+                k = table[cell]
+                if k >= 0 and s > mu[k]:
+                    mu[k] = s
+            if self.defuzzifier == "area_centre":
+                total = moment = 0.0
+                for m, (base, slopes, peak) in zip(mu, self._area_terms[o]):
+                    if m > 0.0:
+                        area = 0.5 * m * (base + (1.0 - m) * slopes)
+                        total += area
+                        moment += area * peak
+                result[output.name] = moment / total if total > 0.0 else output.default
+            else:
+                crisp = float(self._defuzz(np.array([mu]), output, self.resolution)[0])
+                result[output.name] = output.default if crisp != crisp else crisp
+        return result
+
+    def explain(self, **values: float) -> list[tuple[int, float, str]]:
+        """Rules that fired for these inputs: (rule index, strength, rule text), strongest first.
+
+        A rule's strength is the max over the cells it covers (one cell unless it leaves inputs
+        open); a cell is credited to the first rule that covers it.
+        """
+        strengths: dict[int, float] = {}
+        for cell, s in self._fired_cells(values):
+            rule = int(self._cell_rule[cell])
+            if rule >= 0 and s > strengths.get(rule, 0.0):
+                strengths[rule] = s
+        ranked = sorted(strengths.items(), key=lambda item: (-item[1], item[0]))
+        return [(index, s, self.rules[index].text) for index, s in ranked]
