@@ -1,0 +1,475 @@
+"""Global path planner: shortest paths in local ENU metres around fences and known obstacles.
+
+Pure: no I/O, no clock (times are passed in). The daemon builds one ``Planner`` per mission
+(fence + known obstacles) and one ``PathFollower`` that it asks, every control step, for the path
+target the fuzzy navigator steers to.
+
+Method: a visibility graph (shapely for geometry, networkx for the search). Everything the rover
+must not enter -- fence exclusion polygons and circles, known obstacles, temporary "blocked"
+circles reported by the daemon -- is inflated by the clearance
+
+    c = robot.footprint_width_m / 2 + PlannerParams.clearance_margin_m
+
+and inclusion fences are shrunk by ``c``. The remaining free space F is a polygon with holes; a
+shortest path in it is a polyline that bends only at reflex vertices of F, so the graph's nodes are
+those vertices and its edges the vertex pairs whose straight segment stays in F (one vectorised
+shapely ``covers`` call). A visibility graph gives exact shortest paths with few nodes in the
+open, sparse fields a rover mission crosses; a grid A* would need a fine grid over a ~100 m
+field for the same accuracy and still produce staircase paths. The static graph is built once
+and rebuilt only when temporary obstacles change; a query adds the start and goal.
+
+Circles become regular ``PlannerParams.circle_segments``-gons that circumscribe the inflated
+circle, and polygon corners are rounded with the chord error compensated, so the polygonal
+approximation never cuts into the clearance. Graph nodes sit ``NODE_OFFSET_M`` further out than
+the zone used to check edges, so an edge along a zone's side is not refused by rounding.
+
+Ends outside F: a start inside the clearance band or outside the fence (pushed there, or a fence
+breach) first goes straight to the nearest free point, so the rover can always get back; a goal in
+the clearance band is reached from the nearest free point by a last straight segment. A goal
+inside an exclusion zone, a known or blocked obstacle, or outside an inclusion fence is
+unreachable: ``plan_leg`` returns a ``Path`` whose ``error`` says why (no exception).
+
+API:
+    Fence.from_items(items, to_enu) -> Fence       decode MAV_CMD_NAV_FENCE_* items (5001-5004)
+    Planner(params, robot, fence=Fence(), polygons=(), circles=())
+      .plan_leg(start_en, goal_en) -> Path        Path.error is None when a path was found
+      .plan_route(start_en, goals_en) -> Path     the legs joined (for the planned-path plot)
+      .is_inside_fence(point_en) -> bool          fence breach test (raw fence, no clearance)
+      .block(now_s, center_en, radius_m=None)     temporary circular obstacle (a blocked leg)
+      .expire(now_s) -> bool                      forget blocked circles older than blocked_ttl_s
+    Path.project(point_en, s_min_m=0, s_max_m=inf) -> (s_m, cross_track_m)
+    Path.point_at(s_m) -> (east_m, north_m);  Path.carrot(point_en, lookahead_m)
+    PathFollower(planner, params).update(now_s, position_en, goal_en) -> Guidance
+      Guidance.target_en (the carrot, None when there is no path), cross_track_m, remaining_m,
+      replanned, error;  PathFollower.block(now_s, center_en) re-plans around a blocked leg.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Sequence
+
+import networkx as nx
+import numpy as np
+import shapely
+from shapely.geometry import MultiPolygon, Point, Polygon
+from shapely.geometry.polygon import orient
+from shapely.ops import nearest_points, unary_union
+
+from rover_ctl.config import PlannerParams, RobotParams
+from rover_ctl.mission.model import MissionItem
+
+EN = tuple[float, float]
+
+NODE_OFFSET_M = 0.02
+"""Graph vertices sit this much outside the inflated zones used to check edges (rounding margin)."""
+
+UNBOUNDED_M = 1.0e6
+"""Half-size of the square that stands for the plane when there is no inclusion fence."""
+
+FENCE_POLYGON_INCLUSION = 5001
+FENCE_POLYGON_EXCLUSION = 5002
+FENCE_CIRCLE_INCLUSION = 5003
+FENCE_CIRCLE_EXCLUSION = 5004
+FENCE_RETURN_POINT = 5000
+
+
+class FenceError(ValueError):
+    """Fence items that do not describe valid polygons/circles; the message names the item."""
+
+
+@dataclass(frozen=True)
+class Circle:
+    center_en: EN
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class Fence:
+    """A geofence in ENU metres. The rover must be inside every inclusion and outside every
+    exclusion (ArduPilot's AC_PolyFence semantics)."""
+
+    inclusion_polygons: tuple[tuple[EN, ...], ...] = ()
+    exclusion_polygons: tuple[tuple[EN, ...], ...] = ()
+    inclusion_circles: tuple[Circle, ...] = ()
+    exclusion_circles: tuple[Circle, ...] = ()
+
+    @classmethod
+    def from_items(cls, items: Sequence[MissionItem], to_enu: Callable[[float, float], EN]) -> "Fence":
+        """Decode fence items: polygon vertices (5001 inclusion / 5002 exclusion) come as runs of
+        consecutive items whose param1 is the vertex count; circles (5003/5004) have param1 = radius
+        in metres; a return point (5000) is ignored. ``to_enu(lat, lon)`` is the local frame."""
+        polygons: dict[int, list] = {FENCE_POLYGON_INCLUSION: [], FENCE_POLYGON_EXCLUSION: []}
+        circles: dict[int, list] = {FENCE_CIRCLE_INCLUSION: [], FENCE_CIRCLE_EXCLUSION: []}
+        index = 0
+        while index < len(items):
+            item = items[index]
+            if item.command in polygons:
+                count = int(item.param1)
+                run = items[index : index + count]
+                if count < 3:
+                    raise FenceError(f"fence item {index}: polygon with {count} vertices (needs at least 3)")
+                if len(run) < count or any(v.command != item.command or int(v.param1) != count for v in run):
+                    raise FenceError(f"fence item {index}: polygon declares {count} vertices but the run of items is shorter")
+                vertices = tuple(tuple(map(float, to_enu(v.x, v.y))) for v in run)
+                if not Polygon(vertices).is_valid:
+                    raise FenceError(f"fence item {index}: polygon of {count} vertices intersects itself")
+                polygons[item.command].append(vertices)
+                index += count
+            elif item.command in circles:
+                if not item.param1 > 0:
+                    raise FenceError(f"fence item {index}: circle radius {item.param1} m is not positive")
+                circles[item.command].append(Circle(tuple(map(float, to_enu(item.x, item.y))), float(item.param1)))
+                index += 1
+            elif item.command == FENCE_RETURN_POINT:
+                index += 1
+            else:
+                raise FenceError(f"fence item {index}: command {item.command} is not a fence command (5000-5004)")
+        return cls(
+            tuple(polygons[FENCE_POLYGON_INCLUSION]),
+            tuple(polygons[FENCE_POLYGON_EXCLUSION]),
+            tuple(circles[FENCE_CIRCLE_INCLUSION]),
+            tuple(circles[FENCE_CIRCLE_EXCLUSION]),
+        )
+
+
+@dataclass(frozen=True)
+class Path:
+    """A polyline in ENU metres from the start to the goal; ``error`` is set (and ``points`` holds
+    at most the start) when no path exists."""
+
+    points: tuple[EN, ...]
+    error: str | None = None
+    _cumulative_m: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, dtype=float).reshape(-1, 2)
+        steps = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
+        object.__setattr__(self, "_cumulative_m", np.concatenate([[0.0], np.cumsum(steps)]))
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+    @property
+    def length_m(self) -> float:
+        return float(self._cumulative_m[-1]) if self.points else 0.0
+
+    def point_at(self, s_m: float) -> EN:
+        """The point at arc length ``s_m`` (clamped to the path)."""
+        cum = self._cumulative_m
+        s = min(max(s_m, 0.0), float(cum[-1]))
+        i = min(int(np.searchsorted(cum, s, side="right")) - 1, len(self.points) - 2)
+        if i < 0:
+            return self.points[0]
+        seg = cum[i + 1] - cum[i]
+        f = 0.0 if seg == 0 else (s - cum[i]) / seg
+        (ax, ay), (bx, by) = self.points[i], self.points[i + 1]
+        return (float(ax + f * (bx - ax)), float(ay + f * (by - ay)))
+
+    def project(self, point_en: EN, s_min_m: float = 0.0, s_max_m: float = math.inf) -> tuple[float, float]:
+        """Nearest point of the path within arc lengths [s_min_m, s_max_m]: its arc length and the
+        signed cross-track error (positive when ``point_en`` is left of the path direction)."""
+        if len(self.points) < 2:
+            return 0.0, math.dist(point_en, self.points[0]) if self.points else 0.0
+        pts = np.asarray(self.points, dtype=float)
+        a, d = pts[:-1], np.diff(pts, axis=0)
+        cum = self._cumulative_m
+        seg_len = np.diff(cum)
+        p = np.asarray(point_en, dtype=float)
+        t = np.divide(((p - a) * d).sum(axis=1), seg_len**2, out=np.zeros_like(seg_len), where=seg_len > 0)
+        lo, hi = np.maximum(cum[:-1], s_min_m), np.minimum(cum[1:], s_max_m)
+        s = np.clip(cum[:-1] + t * seg_len, lo, np.maximum(lo, hi))
+        f = np.divide(s - cum[:-1], seg_len, out=np.zeros_like(seg_len), where=seg_len > 0)
+        nearest = a + f[:, None] * d
+        dist = np.where(lo <= hi, np.hypot(*(p - nearest).T), np.inf)
+        i = int(np.argmin(dist))
+        if not np.isfinite(dist[i]):  # window beyond the path: the end
+            return self.length_m, math.dist(point_en, self.points[-1])
+        # Sign from the segment's direction: cross(d, p - nearest) > 0 means left.
+        cross = d[i, 0] * (p[1] - nearest[i, 1]) - d[i, 1] * (p[0] - nearest[i, 0])
+        return float(s[i]), float(math.copysign(dist[i], cross))
+
+    def carrot(self, point_en: EN, lookahead_m: float) -> EN:
+        """Pure-pursuit target: ``lookahead_m`` along the path beyond the projection of ``point_en``."""
+        s, _ = self.project(point_en)
+        return self.point_at(s + lookahead_m)
+
+
+def _circle_polygon(center: EN, radius_m: float, segments: int, circumscribed: bool) -> Polygon:
+    """Regular polygon for a circle: circumscribed (edges touch it, vertices at r / cos(pi/n)) or
+    inscribed (vertices on it)."""
+    r = radius_m / math.cos(math.pi / segments) if circumscribed else radius_m
+    angles = np.arange(segments) * 2 * math.pi / segments
+    return Polygon(np.column_stack([center[0] + r * np.cos(angles), center[1] + r * np.sin(angles)]))
+
+
+def _polygons(geometry) -> list[Polygon]:
+    if geometry.is_empty:
+        return []
+    if isinstance(geometry, Polygon):
+        return [geometry]
+    return [g for g in getattr(geometry, "geoms", []) if isinstance(g, Polygon) and not g.is_empty]
+
+
+def _reflex_vertices(free: Polygon | MultiPolygon) -> list[EN]:
+    """Vertices where the free space turns reflex (interior angle > 180 deg): the only places a
+    shortest path bends. With every ring oriented so the free space is on its left, those are
+    the right turns."""
+    nodes = []
+    for poly in _polygons(free):
+        poly = orient(poly, 1.0)
+        for ring in [poly.exterior, *poly.interiors]:
+            pts = np.asarray(ring.coords)[:-1]
+            prev, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)
+            u, v = pts - prev, nxt - pts
+            cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+            nodes.extend(tuple(map(float, p)) for p in pts[cross < 0])
+    return nodes
+
+
+class Planner:
+    """Shortest paths around the fence and known obstacles (see the module docstring)."""
+
+    def __init__(
+        self,
+        params: PlannerParams,
+        robot: RobotParams,
+        fence: Fence = Fence(),
+        polygons: Iterable[Sequence[EN]] = (),
+        circles: Iterable[Circle] = (),
+    ) -> None:
+        self.params = params
+        self.fence = fence
+        self.clearance_m = robot.footprint_width_m / 2.0 + params.clearance_margin_m
+        self._obstacles = [Polygon(p) for p in polygons] + [
+            _circle_polygon(c.center_en, c.radius_m, params.circle_segments, True) for c in circles
+        ]
+        self._blocked: list[tuple[float, Circle]] = []  # (time added, circle)
+        self._inclusions = [Polygon(p) for p in fence.inclusion_polygons] + [
+            _circle_polygon(c.center_en, c.radius_m, params.circle_segments, False) for c in fence.inclusion_circles
+        ]
+        self._exclusions = [Polygon(p) for p in fence.exclusion_polygons] + [
+            _circle_polygon(c.center_en, c.radius_m, params.circle_segments, True) for c in fence.exclusion_circles
+        ]
+        self._rebuild()
+
+    # -- geometry -------------------------------------------------------------------------------
+
+    def _inflated(self, extra_m: float):
+        """Free space with the zones inflated by clearance + extra_m (None: no inclusion fence)."""
+        quad_segs = max(1, self.params.circle_segments // 4)
+        # Round joins are chords of the offset arc; dividing by cos(half the chord angle) keeps
+        # every chord at least the clearance away.
+        chord = math.cos(math.pi / (4 * quad_segs))
+        grow = (self.clearance_m + extra_m) / chord
+        blocked_circles = [
+            _circle_polygon(c.center_en, c.radius_m + self.clearance_m + extra_m, self.params.circle_segments, True)
+            for _, c in self._blocked
+        ]
+        zones = unary_union([z.buffer(grow, quad_segs=quad_segs) for z in self._exclusions + self._obstacles] + blocked_circles)
+        region = None
+        for inclusion in self._inclusions:
+            shrunk = inclusion.buffer(-grow, quad_segs=quad_segs)
+            region = shrunk if region is None else region.intersection(shrunk)
+        return region, zones
+
+    def _rebuild(self) -> None:
+        region, zones = self._inflated(0.0)
+        node_region, node_zones = self._inflated(NODE_OFFSET_M)
+        if region is None:  # no inclusion fence: a box far beyond any mission bounds the plane
+            region = node_region = shapely.box(-UNBOUNDED_M, -UNBOUNDED_M, UNBOUNDED_M, UNBOUNDED_M)
+        self._free = region.difference(zones)
+        self._node_free = node_region.difference(node_zones)
+        shapely.prepare(self._free)
+        nodes = _reflex_vertices(self._node_free)
+        self._graph = nx.Graph()
+        self._graph.add_nodes_from(range(len(nodes)))
+        self._nodes = nodes
+        if len(nodes) > 1:
+            i, j = np.triu_indices(len(nodes), k=1)
+            pts = np.asarray(nodes)
+            visible = self._visible(pts[i], pts[j])
+            for a, b in zip(i[visible], j[visible]):
+                self._graph.add_edge(int(a), int(b), weight=math.dist(nodes[a], nodes[b]))
+
+    def _visible(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        lines = shapely.linestrings(np.stack([a, b], axis=1))
+        return shapely.covers(self._free, lines)
+
+    def _raw_violation(self, point_en: EN) -> str | None:
+        """Why a point is not allowed at all (no clearance involved), or None."""
+        p = Point(point_en)
+        e, n = point_en
+        if not all(inc.covers(p) for inc in self._inclusions):
+            return f"goal ({e:.1f}, {n:.1f}) m is outside the inclusion fence"
+        if any(exc.contains(p) for exc in self._exclusions):
+            return f"goal ({e:.1f}, {n:.1f}) m is inside a fence exclusion zone"
+        if any(obs.contains(p) for obs in self._obstacles):
+            return f"goal ({e:.1f}, {n:.1f}) m is inside a known obstacle"
+        if any(math.dist(point_en, c.center_en) < c.radius_m for _, c in self._blocked):
+            return f"goal ({e:.1f}, {n:.1f}) m is inside a blocked area"
+        return None
+
+    def _to_free(self, point_en: EN) -> EN | None:
+        """``point_en`` if it is in free space, else the nearest point of it (None: none at all)."""
+        if self._free.covers(Point(point_en)):
+            return point_en
+        if self._node_free.is_empty:
+            return None
+        nearest = nearest_points(self._node_free, Point(point_en))[0]
+        return (float(nearest.x), float(nearest.y))
+
+    # -- public ---------------------------------------------------------------------------------
+
+    def is_inside_fence(self, point_en: EN) -> bool:
+        """True unless ``point_en`` is outside an inclusion or inside an exclusion zone (no clearance)."""
+        p = Point(point_en)
+        return all(inc.covers(p) for inc in self._inclusions) and not any(exc.contains(p) for exc in self._exclusions)
+
+    def plan_leg(self, start_en: EN, goal_en: EN) -> Path:
+        """Shortest path from ``start_en`` to ``goal_en``; ``Path.error`` explains a failure."""
+        start_en = (float(start_en[0]), float(start_en[1]))
+        goal_en = (float(goal_en[0]), float(goal_en[1]))
+        reason = self._raw_violation(goal_en)
+        if reason is not None:
+            return Path((start_en,), error=reason)
+        start_free, goal_free = self._to_free(start_en), self._to_free(goal_en)
+        if start_free is None or goal_free is None:
+            return Path((start_en,), error="no free space: the inclusion fence is narrower than the rover's clearance")
+        head = [start_en] if start_free != start_en else []
+        tail = [goal_en] if goal_free != goal_en else []
+        if self._visible(np.array([start_free]), np.array([goal_free]))[0]:
+            middle = [start_free, goal_free]
+        else:
+            middle = self._search(start_free, goal_free)
+            if middle is None:
+                e, n = goal_en
+                return Path((start_en,), error=f"goal ({e:.1f}, {n:.1f}) m cannot be reached: fences or obstacles block every way")
+        points = [p for k, p in enumerate(head + middle + tail) if k == 0 or p != (head + middle + tail)[k - 1]]
+        if len(points) == 1:
+            points.append(points[0])
+        return Path(tuple(points))
+
+    def _search(self, start: EN, goal: EN) -> list[EN] | None:
+        graph, nodes = self._graph, self._nodes
+        if not nodes:
+            return None
+        pts = np.asarray(nodes)
+        graph.add_nodes_from(["start", "goal"])
+        try:
+            for name, end in (("start", start), ("goal", goal)):
+                here = np.repeat(np.array([end]), len(nodes), axis=0)
+                for k in np.flatnonzero(self._visible(here, pts)):
+                    graph.add_edge(name, int(k), weight=math.dist(end, nodes[k]))
+            try:
+                route = nx.astar_path(
+                    graph,
+                    "start",
+                    "goal",
+                    heuristic=lambda u, v: math.dist(start if u == "start" else goal if u == "goal" else nodes[u], goal),
+                    weight="weight",
+                )
+            except nx.NetworkXNoPath:
+                return None
+        finally:
+            graph.remove_nodes_from(["start", "goal"])
+        return [start] + [nodes[k] for k in route[1:-1]] + [goal]
+
+    def plan_route(self, start_en: EN, goals_en: Sequence[EN]) -> Path:
+        """The legs start -> goals[0] -> goals[1] ... joined into one path (first error wins)."""
+        points: list[EN] = [tuple(start_en)]
+        for goal in goals_en:
+            leg = self.plan_leg(points[-1], goal)
+            if not leg.ok:
+                return Path((tuple(start_en),), error=leg.error)
+            points.extend(leg.points[1:])
+        if len(points) == 1:
+            points.append(points[0])
+        return Path(tuple(points))
+
+    def block(self, now_s: float, center_en: EN, radius_m: float | None = None) -> None:
+        """Add a temporary circular obstacle (a leg reported blocked) for ``blocked_ttl_s``."""
+        radius = self.params.blocked_radius_m if radius_m is None else radius_m
+        self._blocked.append((now_s, Circle((float(center_en[0]), float(center_en[1])), float(radius))))
+        self._rebuild()
+
+    def expire(self, now_s: float) -> bool:
+        """Forget blocked circles older than ``blocked_ttl_s``; True if any went."""
+        kept = [(t, c) for t, c in self._blocked if now_s - t < self.params.blocked_ttl_s]
+        if len(kept) == len(self._blocked):
+            return False
+        self._blocked = kept
+        self._rebuild()
+        return True
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """What the navigator steers to this step."""
+
+    target_en: EN | None
+    """The carrot on the path; None when there is no path (the daemon holds)."""
+    cross_track_m: float
+    """Signed distance from the path (positive: rover left of the path)."""
+    remaining_m: float
+    """Path length left from the rover's projection to the goal."""
+    path: Path | None
+    replanned: bool
+    error: str | None = None
+
+
+class PathFollower:
+    """Keeps a path to the executor's current goal, re-plans when needed, and gives the carrot.
+
+    Re-plans from the current position when the goal changes, when a leg is reported blocked,
+    when a blocked area expires, and -- at most once per ``replan_min_interval_s`` -- when the
+    cross-track error exceeds ``replan_off_path_m`` or the last plan failed.
+    """
+
+    def __init__(self, planner: Planner, params: PlannerParams) -> None:
+        self.planner = planner
+        self.params = params
+        self.path: Path | None = None
+        self._goal: EN | None = None
+        self._progress_s = 0.0
+        self._last_plan_s = -math.inf
+        self._force = False
+
+    def block(self, now_s: float, center_en: EN, radius_m: float | None = None) -> None:
+        """A leg is blocked at ``center_en``: avoid it (temporarily) and re-plan on the next update."""
+        self.planner.block(now_s, center_en, radius_m)
+        self._force = True
+
+    def reset(self) -> None:
+        """Forget the path (mode change): the next update plans afresh."""
+        self.path, self._goal, self._progress_s = None, None, 0.0
+
+    def update(self, now_s: float, position_en: EN, goal_en: EN) -> Guidance:
+        goal = (float(goal_en[0]), float(goal_en[1]))
+        if self.planner.expire(now_s):
+            self._force = True
+        replan = self._force or self.path is None or goal != self._goal
+        cross_track = 0.0
+        if not replan:
+            cross_track = self._project(position_en)
+            off_path = abs(cross_track) > self.params.replan_off_path_m or not self.path.ok
+            replan = off_path and now_s - self._last_plan_s >= self.params.replan_min_interval_s
+        if replan:
+            self.path = self.planner.plan_leg(position_en, goal)
+            self._goal, self._progress_s, self._last_plan_s, self._force = goal, 0.0, now_s, False
+            cross_track = self._project(position_en)
+        path = self.path
+        if not path.ok:
+            return Guidance(None, 0.0, math.inf, path, replan, path.error)
+        target = path.point_at(self._progress_s + self.params.lookahead_m)
+        return Guidance(target, cross_track, path.length_m - self._progress_s, path, replan)
+
+    def _project(self, position_en: EN) -> float:
+        """Advance the progress along the path (never backwards, within the projection window)."""
+        if not self.path.ok:
+            return 0.0
+        s, cross_track = self.path.project(position_en, self._progress_s, self._progress_s + self.params.projection_window_m)
+        self._progress_s = max(self._progress_s, s)
+        return cross_track
