@@ -1,0 +1,330 @@
+"""Pose estimation: wheel odometry, gyro, compass and GPS fused by an extended Kalman filter.
+
+No I/O: the filter takes typed readings (``rover_ctl.readings``) stamped with vehicle time and
+returns a ``Pose`` in the local ENU frame (``rover_ctl.geo.LocalFrame``). docs/estimator.md has
+the derivation, the tuning and the measured figures.
+
+State ``x = [e, n, psi, v, b]``: east and north (m), ENU heading (rad, 0 east, CCW), speed
+along the heading (m/s, negative when reversing) and the gyro bias (rad/s, ENU sense).
+
+Motion model over ``dt`` with the latest gyro rate ``g`` (ENU) and ``w = g - b``, integrated at
+the mid-point heading ``m = psi + w dt / 2``::
+
+    e'   = e + v dt cos m          psi' = psi + w dt
+    n'   = n + v dt sin m          v'   = v,   b' = b
+
+When no ATTITUDE came for ``attitude_timeout_s`` the turn rate is taken from the wheels instead,
+``w = (d_right - d_left) / track / dt``: a skid-steer rover slips sideways in turns, so this
+over-estimates the rate and is only a fallback. The process noise is
+``Q = diag(s_lat^2, s_lat^2, s_gyro^2, s_acc^2, s_bias^2) * dt`` (random
+walks: sideways skid, gyro angle noise, speed change, bias wander). Measurements, all linear:
+
+* wheels: ``z = (d_left + d_right) / 2 / dt`` of two successive cumulative WHEEL_DISTANCE
+  readings measures ``v``, with ``sigma = floor + slip * |z|``;
+* compass (ATTITUDE yaw, NED -> ENU): measures ``psi``; the residual is wrapped to [-pi, pi);
+* GPS: ``(e, n)`` of the fix measures the position with ``sigma = max(eph, floor)``.
+
+Why an EKF and not a UKF: the only nonlinearity is the heading in the position update, which is
+mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF with the exact
+Jacobian costs one 5x5 covariance product per reading, the UKF eleven sigma points and an angle-
+aware mean, for no accuracy a rover can see.
+
+GPS gating and recovery: a fix is fused only if its innovation's Mahalanobis distance
+``sqrt(y' S^-1 y)`` is within ``gate_sigma``. Rejected fixes leave the filter dead reckoning, so
+its covariance grows and a real drift is soon accepted again; a disagreement sustained for
+``glitch_reset_s`` resets the position to the GPS (EKF3's GLITCH_RAD rule), since then it is more
+likely the filter that is wrong.
+
+Time: each reading carries vehicle time. A reading newer than the filter's time predicts the
+filter forward to it and is then fused. A reading up to ``max_lag_s`` older than the filter's
+time (streams interleave: GPS is stamped before the wheel reading of the same frame arrives) is
+fused at the filter's time, shifted by the motion over the lag (GPS by ``v * lag`` along the
+heading, compass by ``w * lag``). A reading no newer than the last one of its own stream is a
+duplicate or arrived out of order and is dropped; wheel distances are cumulative, so the next
+reading's delta covers a dropped one.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from rover_ctl.config import EstimatorParams
+from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
+from rover_ctl.readings import Attitude, GpsFix, WheelDistance
+
+E, N, PSI, V, BIAS = range(5)
+_DIM = 5
+
+
+class GpsVerdict(enum.Enum):
+    """What ``PoseEstimator.on_gps`` did with a fix."""
+
+    ACCEPTED = "accepted"
+    """Fused into the filter."""
+    REJECTED = "rejected"
+    """Outside the innovation gate: treated as a glitch and not used."""
+    RESET = "reset"
+    """Set the position outright: the first fix, or after sustained disagreement."""
+    IGNORED = "ignored"
+    """No fix, a duplicate, or too old to use."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    """The estimate at ``time_s`` (vehicle time). Before initialisation every number is NaN and
+    ``healthy`` and ``gps_ok`` are false."""
+
+    time_s: float
+    east_m: float
+    north_m: float
+    heading_rad: float
+    """ENU: 0 east, counter-clockwise positive, in [-pi, pi)."""
+    speed_mps: float
+    yaw_rate_radps: float
+    """ENU (counter-clockwise positive), gyro minus estimated bias."""
+    cov: np.ndarray
+    """3x3 covariance of (east_m, north_m, heading_rad)."""
+    healthy: bool
+    """Initialised and both position and heading 1-sigma within the health limits."""
+    gps_ok: bool
+    """A fix was fused within the last ``gps_timeout_s``."""
+    position_sigma_m: float
+    """1-sigma along the worst horizontal axis: sqrt of the largest eigenvalue of cov[:2, :2]."""
+    heading_sigma_rad: float
+
+
+class _RoverEkf(ExtendedKalmanFilter):
+    """filterpy's EKF with the rover's nonlinear motion model as its state prediction."""
+
+    def predict_x(self, u=0):
+        dt_s, gyro_radps = u
+        self.x, self.F = motion_model(self.x, dt_s, gyro_radps)
+
+
+def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndarray, np.ndarray]:
+    """State ``x`` (5x1) propagated ``dt_s`` with the gyro rate ``gyro_radps`` (ENU), and the
+    Jacobian ``F = d x' / d x``."""
+    psi, v, bias = float(x[PSI, 0]), float(x[V, 0]), float(x[BIAS, 0])
+    w = gyro_radps - bias
+    mid = psi + 0.5 * w * dt_s
+    c, s = math.cos(mid), math.sin(mid)
+    out = x.copy()
+    out[E, 0] += v * dt_s * c
+    out[N, 0] += v * dt_s * s
+    out[PSI, 0] = wrap_pi(psi + w * dt_s)
+    jac = np.eye(_DIM)
+    jac[E, PSI] = -v * dt_s * s
+    jac[E, V] = dt_s * c
+    jac[E, BIAS] = 0.5 * v * dt_s * dt_s * s  # d mid / d b = -dt/2
+    jac[N, PSI] = v * dt_s * c
+    jac[N, V] = dt_s * s
+    jac[N, BIAS] = -0.5 * v * dt_s * dt_s * c
+    jac[PSI, BIAS] = -dt_s
+    return out, jac
+
+
+def _selector(*rows: int):
+    """Linear measurement of some state components: the H matrix and h(x)."""
+    h = np.zeros((len(rows), _DIM))
+    for i, row in enumerate(rows):
+        h[i, row] = 1.0
+    return (lambda x: h), (lambda x: h @ x)
+
+
+_H_POS, _HX_POS = _selector(E, N)
+_H_PSI, _HX_PSI = _selector(PSI)
+_H_V, _HX_V = _selector(V)
+
+
+def _angle_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
+    return wrap_pi(z - hx)
+
+
+class PoseEstimator:
+    """The rover's pose from wheels, gyro, compass and GPS (see the module docstring)."""
+
+    def __init__(self, frame: LocalFrame, params: EstimatorParams, track_m: float) -> None:
+        if not track_m > 0.0:
+            raise ValueError(f"PoseEstimator: track_m must be positive, got {track_m!r}")
+        self.frame = frame
+        self.params = params
+        self.track_m = track_m
+        self._kf = _RoverEkf(dim_x=_DIM, dim_z=2)
+        self._time_s = -math.inf
+        self._initialised = False
+        self._gyro_radps = 0.0
+        self._wheel_turn_radps = 0.0
+        self._last_wheel: WheelDistance | None = None
+        self._last_attitude_s = -math.inf
+        self._last_gps_s = -math.inf
+        self._gps_fused_s = -math.inf
+        self._rejected_since_s: float | None = None
+        self._pending_fix: tuple[float, float, float] | None = None  # east, north, sigma
+        self._pending_heading: float | None = None
+
+    # ----------------------------------------------------------------------------- state access
+    @property
+    def initialised(self) -> bool:
+        """True once a GPS fix and a compass heading have both arrived."""
+        return self._initialised
+
+    def pose(self) -> Pose:
+        """The current estimate (NaNs and unhealthy before initialisation)."""
+        if not self._initialised:
+            nan = math.nan
+            return Pose(self._time_s, nan, nan, nan, nan, nan, np.full((3, 3), nan), False, False, nan, nan)
+        x, p = self._kf.x[:, 0], self._kf.P
+        cov = p[:3, :3].copy()
+        position_sigma_m = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        heading_sigma_rad = math.sqrt(max(float(cov[2, 2]), 0.0))
+        healthy = (
+            position_sigma_m <= self.params.health_max_position_sigma_m
+            and heading_sigma_rad <= self.params.health_max_heading_sigma_rad
+        )
+        return Pose(
+            time_s=self._time_s,
+            east_m=float(x[E]),
+            north_m=float(x[N]),
+            heading_rad=float(x[PSI]),
+            speed_mps=float(x[V]),
+            yaw_rate_radps=self._rate_input_radps(self._time_s) - float(x[BIAS]),
+            cov=cov,
+            healthy=healthy,
+            gps_ok=self._time_s - self._gps_fused_s <= self.params.gps_timeout_s,
+            position_sigma_m=position_sigma_m,
+            heading_sigma_rad=heading_sigma_rad,
+        )
+
+    # ------------------------------------------------------------------------------- readings
+    def on_wheels(self, r: WheelDistance) -> None:
+        """Cumulative wheel distances: the speed measurement is their mean rate since the last."""
+        last = self._last_wheel
+        if last is not None and r.time_s <= last.time_s:
+            return
+        if not (math.isfinite(r.left_m) and math.isfinite(r.right_m)):
+            return
+        self._last_wheel = r
+        if last is None:
+            return
+        dt_s = r.time_s - last.time_s
+        speed_mps = ((r.left_m - last.left_m) + (r.right_m - last.right_m)) / 2.0 / dt_s
+        turn_radps = ((r.right_m - last.right_m) - (r.left_m - last.left_m)) / self.track_m / dt_s
+        wheel_rate = max(abs(r.left_m - last.left_m), abs(r.right_m - last.right_m)) / dt_s
+        if wheel_rate > self.params.wheel_max_speed_mps:
+            return  # counter reset or glitch: r is the new baseline
+        self._wheel_turn_radps = turn_radps
+        if not self._advance(r.time_s):
+            return
+        sigma = self.params.wheel_speed_sigma_mps + self.params.wheel_slip_fraction * abs(speed_mps)
+        self._kf.update(np.array([[speed_mps]]), _H_V, _HX_V, R=np.array([[sigma * sigma]]))
+
+    def on_attitude(self, r: Attitude) -> None:
+        """Gyro rate for the prediction from now on, and the compass heading as a measurement."""
+        if r.time_s <= self._last_attitude_s or not (math.isfinite(r.yaw_rad) and math.isfinite(r.yaw_rate_radps)):
+            return
+        self._last_attitude_s = r.time_s
+        heading_rad = compass_to_enu_rad(r.yaw_rad)
+        if not self._initialised:
+            self._gyro_radps = -r.yaw_rate_radps
+            self._pending_heading = heading_rad
+            self._time_s = max(self._time_s, r.time_s)
+            self._try_initialise()
+            return
+        if not self._advance(r.time_s):
+            return
+        self._gyro_radps = -r.yaw_rate_radps  # NED clockwise -> ENU counter-clockwise
+        lag_s = self._time_s - r.time_s
+        z = wrap_pi(heading_rad + (self._gyro_radps - float(self._kf.x[BIAS, 0])) * lag_s)
+        sigma = self.params.compass_sigma_rad
+        self._kf.update(np.array([[z]]), _H_PSI, _HX_PSI, R=np.array([[sigma * sigma]]), residual=_angle_residual)
+        self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
+
+    def on_gps(self, r: GpsFix) -> GpsVerdict:
+        """Fuse, reject (gate) or reset to a fix; see the module docstring."""
+        if not r.has_fix or r.time_s <= self._last_gps_s:
+            return GpsVerdict.IGNORED
+        self._last_gps_s = r.time_s
+        east_m, north_m = self.frame.to_enu(r.lat_deg, r.lon_deg)
+        eph_m = r.eph_m if math.isfinite(r.eph_m) else self.params.gps_default_sigma_m
+        sigma_m = max(eph_m, self.params.gps_min_sigma_m)
+        if not self._initialised:
+            self._pending_fix = (east_m, north_m, sigma_m)
+            self._time_s = max(self._time_s, r.time_s)
+            self._gps_fused_s = r.time_s
+            self._try_initialise()
+            return GpsVerdict.RESET
+        if not self._advance(r.time_s):
+            return GpsVerdict.IGNORED
+        x = self._kf.x[:, 0]
+        lag_s = self._time_s - r.time_s
+        z = np.array([[east_m + x[V] * lag_s * math.cos(x[PSI])], [north_m + x[V] * lag_s * math.sin(x[PSI])]])
+        r_cov = np.eye(2) * sigma_m * sigma_m
+        innovation = z - _HX_POS(self._kf.x)
+        s_cov = self._kf.P[:2, :2] + r_cov
+        distance2 = float((innovation.T @ np.linalg.solve(s_cov, innovation))[0, 0])
+        if distance2 <= self.params.gate_sigma**2:
+            self._kf.update(z, _H_POS, _HX_POS, R=r_cov)
+            self._rejected_since_s = None
+            self._gps_fused_s = self._time_s
+            return GpsVerdict.ACCEPTED
+        if self._rejected_since_s is None:
+            self._rejected_since_s = r.time_s
+        if r.time_s - self._rejected_since_s < self.params.glitch_reset_s:
+            return GpsVerdict.REJECTED
+        self._reset_position(z, r_cov)
+        return GpsVerdict.RESET
+
+    # -------------------------------------------------------------------------------- internals
+    def _advance(self, time_s: float) -> bool:
+        """Predict forward to ``time_s`` if it is newer; False if it is too old to use."""
+        if not self._initialised:
+            return False
+        dt_s = time_s - self._time_s
+        if dt_s <= 0.0:
+            return -dt_s <= self.params.max_lag_s
+        p = self.params
+        self._kf.Q = np.diag(
+            [
+                p.lateral_slip_per_sqrt_s**2,
+                p.lateral_slip_per_sqrt_s**2,
+                p.gyro_noise_rad_per_sqrt_s**2,
+                p.speed_accel_per_sqrt_s**2,
+                p.gyro_bias_walk_radps_per_sqrt_s**2,
+            ]
+        ) * dt_s
+        self._kf.predict(u=(dt_s, self._rate_input_radps(time_s)))
+        self._time_s = time_s
+        return True
+
+    def _rate_input_radps(self, time_s: float) -> float:
+        """The gyro rate, or without a recent gyro the wheels' turn rate plus the bias estimate
+        (the model subtracts the bias, which only the gyro has)."""
+        if time_s - self._last_attitude_s <= self.params.attitude_timeout_s:
+            return self._gyro_radps
+        return self._wheel_turn_radps + float(self._kf.x[BIAS, 0])
+
+    def _try_initialise(self) -> None:
+        if self._pending_fix is None or self._pending_heading is None:
+            return
+        east_m, north_m, sigma_m = self._pending_fix
+        p = self.params
+        self._kf.x = np.array([[east_m], [north_m], [self._pending_heading], [0.0], [0.0]])
+        # Speed unknown until the next wheel reading: any plausible speed.
+        self._kf.P = np.diag(
+            [sigma_m**2, sigma_m**2, p.compass_sigma_rad**2, p.wheel_max_speed_mps**2, p.gyro_bias_sigma0_radps**2]
+        )
+        self._initialised = True
+
+    def _reset_position(self, z: np.ndarray, r_cov: np.ndarray) -> None:
+        """Position := the fix, uncorrelated with the rest of the state."""
+        self._kf.x[E:N + 1] = z
+        self._kf.P[:2, :] = 0.0
+        self._kf.P[:, :2] = 0.0
+        self._kf.P[:2, :2] = r_cov
+        self._rejected_since_s = None
+        self._gps_fused_s = self._time_s
