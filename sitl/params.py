@@ -1,0 +1,213 @@
+"""The emulator's parameters: every number the simulated rover is made of, named, with its unit.
+
+Defaults describe the paper's robot (Wondosen & Shiferaw 2017: 6 kg, track 0.32 m, wheel radius
+0.07 m, motor constant 0.1 V/(rad/s)) with consumer-grade sensors. The emulator shares nothing with
+the daemon's ``rover_ctl.config``: it stands for the physical rover.
+
+Drive-train derivation (defaults). Per wheel, with gear ratio N between motor and wheel
+(motor speed w_m = N w), the steady state of ``L di/dt + R i = V - Ke N w`` and
+``J dw/dt + N^2 b w = N Kt i`` (inertias reflected to the wheel) is::
+
+    w_ss = Kt V / (N (R b + Kt Ke))
+         = 0.1 * 12 / (5 * (4 * 1e-4 + 0.01)) = 23.1 rad/s = 220 rpm  (1.62 m/s)
+
+and, the electrical time constant L/R = 0.5 ms being negligible, the straight-line mechanical time
+constant is::
+
+    tau = (J_wheel + N^2 J_rotor + m r^2 / 2) R / (N^2 (R b + Kt Ke))
+        = (2.5e-4 + 25 * 1e-4 + 6 * 0.07^2 / 2) * 4 / (25 * 0.0104) = 0.27 s
+
+(each wheel carries half the robot's mass; turning in place each carries I_z r^2 / track^2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+
+@dataclass
+class MotorParams:
+    """One brushed DC motor with its gearbox and the battery driving it through an H-bridge."""
+
+    battery_v: float = 12.0
+    """Battery voltage; PWM maps to motor voltage as (pwm - neutral) / range * battery_v."""
+    pwm_neutral_us: float = 1500.0
+    """PWM width for zero voltage."""
+    pwm_range_us: float = 500.0
+    """PWM offset from neutral that gives full battery voltage (1000 and 2000 us are full reverse/forward)."""
+    resistance_ohm: float = 4.0
+    """Armature resistance R (sets the mechanical time constant and the 3 A stall current)."""
+    inductance_h: float = 0.002
+    """Armature inductance L (electrical time constant L/R = 0.5 ms)."""
+    ke_v_per_radps: float = 0.1
+    """Back-EMF constant at the motor shaft (the paper's motor constant)."""
+    kt_nm_per_a: float = 0.1
+    """Torque constant at the motor shaft (equal to Ke in SI units)."""
+    gear_ratio: float = 5.0
+    """Motor turns per wheel turn N."""
+    rotor_inertia_kgm2: float = 1e-4
+    """Rotor inertia J at the motor shaft."""
+    viscous_nms_per_rad: float = 1e-4
+    """Viscous friction b at the motor shaft (bearings, gearbox)."""
+
+    def steady_wheel_radps(self, volts: float) -> float:
+        """Closed-form steady wheel speed for a constant voltage: Kt V / (N (R b + Kt Ke))."""
+        return self.kt_nm_per_a * volts / (
+            self.gear_ratio * (self.resistance_ohm * self.viscous_nms_per_rad + self.kt_nm_per_a * self.ke_v_per_radps)
+        )
+
+
+@dataclass
+class RobotParams:
+    """The rover's body (defaults: the paper's robot)."""
+
+    mass_kg: float = 6.0
+    track_m: float = 0.32
+    """Distance between the left and right wheel contact lines."""
+    wheel_radius_m: float = 0.07
+    wheel_inertia_kgm2: float = 2.5e-4
+    """Inertia of one wheel about its axle (0.1 kg disc of radius 0.07 m)."""
+    footprint_length_m: float = 0.45
+    """Length of the rectangular footprint used for collisions (centred on the axle midpoint)."""
+    footprint_width_m: float = 0.40
+    yaw_inertia_kgm2: float | None = None
+    """Inertia about the vertical axis; None: a uniform box of the footprint, m (l^2 + w^2) / 12."""
+
+    @property
+    def yaw_inertia(self) -> float:
+        if self.yaw_inertia_kgm2 is not None:
+            return self.yaw_inertia_kgm2
+        return self.mass_kg * (self.footprint_length_m**2 + self.footprint_width_m**2) / 12.0
+
+
+@dataclass
+class GpsParams:
+    """A consumer GNSS receiver (u-blox M8 class, open sky).
+
+    Error per horizontal axis = white noise + first-order Gauss-Markov bias + glitch offset. Such
+    receivers are good to ~2.5 m CEP, and most of that error is correlated over minutes (multipath
+    and atmosphere), so the bias dominates: per-axis 1-sigma sqrt(0.5^2 + 1.0^2) = 1.1 m."""
+
+    rate_hz: float = 5.0
+    white_std_m: float = 0.5
+    """Per-axis standard deviation of the sample-to-sample noise."""
+    bias_std_m: float = 1.0
+    """Per-axis stationary standard deviation of the wandering bias."""
+    bias_tau_s: float = 120.0
+    """Correlation time of the bias (Gauss-Markov: autocorrelation exp(-|dt| / tau))."""
+    dropout_prob: float = 0.002
+    """Probability that a fix is lost (sample returns None) independently of faults."""
+    speed_std_mps: float = 0.05
+    """Per-axis white noise on the reported velocity (speed and course are derived from it)."""
+    alt_std_m: float = 1.5
+    satellites: int = 10
+    fix_type: int = 3
+    """GPS_FIX_TYPE reported while the receiver has a fix (3 = 3D)."""
+
+    @property
+    def eph_m(self) -> float:
+        """The per-axis 1-sigma the receiver reports: consistent with the error model."""
+        return math.hypot(self.white_std_m, self.bias_std_m)
+
+
+@dataclass(frozen=True)
+class RangefinderMount:
+    """Where one rangefinder sits on the body and where it looks.
+
+    ``orientation`` is MAV_SENSOR_ORIENTATION (0 front, 1 yaw 45 right, 2 right, ..., 7 yaw 315);
+    the beam looks ``orientation * 45`` degrees clockwise from the nose."""
+
+    sensor_id: int
+    orientation: int
+    forward_m: float
+    """Mount position ahead of the axle midpoint."""
+    left_m: float
+    """Mount position left of the axle midpoint."""
+
+    @property
+    def bearing_rad(self) -> float:
+        """Beam direction in the body frame, counter-clockwise from the nose (ENU convention)."""
+        return -self.orientation * math.pi / 4.0
+
+
+def default_rangefinders() -> list[RangefinderMount]:
+    """Front, back, left, right (the paper's four) plus front-left and front-right at 45 degrees,
+    on the edges of the 0.45 x 0.40 m footprint."""
+    half_l, half_w = 0.225, 0.20
+    return [
+        RangefinderMount(0, 0, half_l, 0.0),
+        RangefinderMount(1, 4, -half_l, 0.0),
+        RangefinderMount(2, 6, 0.0, half_w),
+        RangefinderMount(3, 2, 0.0, -half_w),
+        RangefinderMount(4, 7, half_l, half_w),
+        RangefinderMount(5, 1, half_l, -half_w),
+    ]
+
+
+def paper_rangefinders() -> list[RangefinderMount]:
+    """The paper's four sensors only: front, back, left, right."""
+    return default_rangefinders()[:4]
+
+
+@dataclass
+class RangefinderParams:
+    """Ultrasonic rangefinders (HC-SR04 class)."""
+
+    rate_hz: float = 20.0
+    min_m: float = 0.2
+    """Closer echoes are reported as min_m."""
+    max_m: float = 4.0
+    """Nothing within max_m: no echo (range None)."""
+    fov_deg: float = 15.0
+    """Full beam width; the nearest hit over the beam is reported."""
+    rays_per_beam: int = 5
+    """Rays cast across the beam (evenly from -fov/2 to +fov/2)."""
+    noise_std_m: float = 0.02
+    """White noise on every echo."""
+    sensors: list[RangefinderMount] = field(default_factory=default_rangefinders)
+
+
+@dataclass
+class ImuParams:
+    """Compass and yaw-rate gyro (MEMS IMU class)."""
+
+    rate_hz: float = 50.0
+    compass_noise_std_deg: float = 1.0
+    """White noise per compass sample."""
+    compass_bias_std_deg: float = 2.0
+    """Standard deviation of the constant compass offset drawn per run (calibration residue)."""
+    gyro_noise_std_dps: float = 0.3
+    """White noise per gyro sample."""
+    gyro_bias_std_dps: float = 0.1
+    """Stationary standard deviation of the Gauss-Markov gyro bias."""
+    gyro_bias_tau_s: float = 300.0
+
+
+@dataclass
+class EncoderParams:
+    """Quadrature wheel encoders reporting cumulative distance."""
+
+    rate_hz: float = 50.0
+    ticks_per_rev: int = 1440
+    """Counts per wheel turn: distance quantum 2 pi r / ticks (0.3 mm)."""
+    slip_noise_m2_per_m: float = 1e-4
+    """Variance of the random walk between wheel and ground per metre rolled (1 cm after 1 m)."""
+
+
+@dataclass
+class SitlParams:
+    """All sections of the emulator."""
+
+    motor: MotorParams = field(default_factory=MotorParams)
+    robot: RobotParams = field(default_factory=RobotParams)
+    gps: GpsParams = field(default_factory=GpsParams)
+    rangefinder: RangefinderParams = field(default_factory=RangefinderParams)
+    imu: ImuParams = field(default_factory=ImuParams)
+    encoder: EncoderParams = field(default_factory=EncoderParams)
+    physics_dt_s: float = 0.001
+    """Fixed integration substep."""
+    collision_check_s: float = 0.01
+    """Interval of footprint-versus-obstacle checks (2 cm of travel at top speed)."""
+    contact_release_m: float = 0.05
+    """A contact ends once the footprint is this far from the obstacle (one event per contact)."""
