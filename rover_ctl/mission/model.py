@@ -5,6 +5,10 @@ It is the wire form: a mission, a fence and a rally list are each a sequence of
 so the protocol is lossless by construction and the file formats are translations of it.
 For global frames ``x``/``y`` are latitude/longitude in degrees (floats; the wire uses 1e7
 integers) and ``z`` is altitude in metres; for other frames they are the raw param5-7.
+
+Fences keep the wire encoding too (MAV_CMD 5000-5004: a polygon is a run of vertex items whose
+param1 is the vertex count; a circle's param1 is its radius); ``Mission.fence_polygons()``,
+``fence_circles()`` and ``fence_return_point`` are the typed views the planner uses.
 """
 
 from __future__ import annotations
@@ -21,6 +25,45 @@ class MissionType(enum.IntEnum):
     FENCE = 1
     RALLY = 2
 
+
+class Cmd(enum.IntEnum):
+    """The MAV_CMD values this package names (the rest stay plain ints)."""
+
+    NAV_WAYPOINT = 16
+    NAV_LOITER_UNLIM = 17
+    NAV_LOITER_TURNS = 18
+    NAV_LOITER_TIME = 19
+    NAV_RETURN_TO_LAUNCH = 20
+    NAV_LAND = 21
+    CONDITION_DELAY = 112
+    DO_JUMP = 177
+    DO_CHANGE_SPEED = 178
+    DO_SET_HOME = 179
+    NAV_FENCE_RETURN_POINT = 5000
+    NAV_FENCE_POLYGON_VERTEX_INCLUSION = 5001
+    NAV_FENCE_POLYGON_VERTEX_EXCLUSION = 5002
+    NAV_FENCE_CIRCLE_INCLUSION = 5003
+    NAV_FENCE_CIRCLE_EXCLUSION = 5004
+    NAV_RALLY_POINT = 5100
+
+
+SUPPORTED_COMMANDS = frozenset(
+    {
+        Cmd.NAV_WAYPOINT,
+        Cmd.NAV_LOITER_TIME,
+        Cmd.NAV_RETURN_TO_LAUNCH,
+        Cmd.CONDITION_DELAY,
+        Cmd.DO_JUMP,
+        Cmd.DO_CHANGE_SPEED,
+    }
+)
+"""Mission commands the rover's executor carries out; any other mission command is skipped."""
+NAV_POSITION_COMMANDS = frozenset({Cmd.NAV_WAYPOINT, Cmd.NAV_LOITER_TIME})
+"""Supported commands that drive the rover to the item's latitude/longitude."""
+FENCE_POLYGON_COMMANDS = frozenset({Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION, Cmd.NAV_FENCE_POLYGON_VERTEX_EXCLUSION})
+FENCE_CIRCLE_COMMANDS = frozenset({Cmd.NAV_FENCE_CIRCLE_INCLUSION, Cmd.NAV_FENCE_CIRCLE_EXCLUSION})
+FENCE_COMMANDS = FENCE_POLYGON_COMMANDS | FENCE_CIRCLE_COMMANDS | {Cmd.NAV_FENCE_RETURN_POINT}
+RALLY_COMMANDS = frozenset({Cmd.NAV_RALLY_POINT})
 
 # MAV_FRAME values used by missions.
 FRAME_GLOBAL = 0
@@ -86,6 +129,53 @@ class Home:
     lon_deg: float
     alt_m: float = 0.0
 
+    def same_as(self, other: "Home | None", tol_deg: float = 1e-7, tol_m: float = 1e-3) -> bool:
+        """Equal within wire precision (1e-7 deg, 1 mm)."""
+        return (
+            other is not None
+            and abs(self.lat_deg - other.lat_deg) <= tol_deg
+            and abs(self.lon_deg - other.lon_deg) <= tol_deg
+            and abs(self.alt_m - other.alt_m) <= tol_m
+        )
+
+
+@dataclass(frozen=True)
+class FencePolygon:
+    """A fence polygon: vertices as (lat, lon) degrees, in order, not closed (last != first)."""
+
+    vertices_latlon: tuple[tuple[float, float], ...]
+    inclusion: bool
+
+
+@dataclass(frozen=True)
+class FenceCircle:
+    center_latlon: tuple[float, float]
+    radius_m: float
+    inclusion: bool
+
+
+def polygon_runs(fence: list[MissionItem]) -> list[tuple[int, int]]:
+    """``(start, stop)`` index ranges of the polygons in a fence list.
+
+    A polygon starts at a vertex item and spans ``param1`` (its vertex count) items, cut short
+    where the command changes; validation reports runs whose length differs from their count.
+    """
+    runs = []
+    i = 0
+    while i < len(fence):
+        command = fence[i].command
+        if command not in FENCE_POLYGON_COMMANDS:
+            i += 1
+            continue
+        count = fence[i].param1
+        wanted = int(count) if math.isfinite(count) and count >= 1 else 1
+        stop = i + 1
+        while stop < len(fence) and stop - i < wanted and fence[stop].command == command:
+            stop += 1
+        runs.append((i, stop))
+        i = stop
+    return runs
+
 
 @dataclass
 class Mission:
@@ -100,6 +190,44 @@ class Mission:
     home: Home | None = None
     fence: list[MissionItem] = field(default_factory=list)
     rally: list[MissionItem] = field(default_factory=list)
+
+    def fence_polygons(self) -> list[FencePolygon]:
+        return [
+            FencePolygon(
+                tuple((item.lat_deg, item.lon_deg) for item in self.fence[start:stop]),
+                self.fence[start].command == Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+            )
+            for start, stop in polygon_runs(self.fence)
+        ]
+
+    def fence_circles(self) -> list[FenceCircle]:
+        return [
+            FenceCircle((item.lat_deg, item.lon_deg), item.param1, item.command == Cmd.NAV_FENCE_CIRCLE_INCLUSION)
+            for item in self.fence
+            if item.command in FENCE_CIRCLE_COMMANDS
+        ]
+
+    @property
+    def fence_return_point(self) -> tuple[float, float, float] | None:
+        """(lat, lon, alt) of the fence breach return point, if the fence has one."""
+        for item in self.fence:
+            if item.command == Cmd.NAV_FENCE_RETURN_POINT:
+                return (item.lat_deg, item.lon_deg, item.alt_m)
+        return None
+
+    def same_as(self, other: "Mission") -> bool:
+        """Equal within wire precision: home, and every item of the mission, fence and rally."""
+
+        def same_items(a: list[MissionItem], b: list[MissionItem]) -> bool:
+            return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
+
+        same_home = other.home is None if self.home is None else self.home.same_as(other.home)
+        return (
+            same_home
+            and same_items(self.items, other.items)
+            and same_items(self.fence, other.fence)
+            and same_items(self.rally, other.rally)
+        )
 
     def of_type(self, mission_type: MissionType) -> list[MissionItem]:
         return {MissionType.MISSION: self.items, MissionType.FENCE: self.fence, MissionType.RALLY: self.rally}[
