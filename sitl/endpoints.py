@@ -1,0 +1,284 @@
+"""MAVLink endpoints of the emulator: udpin, udpout, tcpin, tcp (pymavlink connection strings) and a pty.
+
+Each endpoint owns non-blocking file descriptors and one MAVLink parser/packer per peer (a tcpin
+endpoint accepts several clients). Reads take whole buffers (``parse_buffer``) rather than the
+byte-at-a-time loop of ``mavutil``'s connections, which keeps the emulator's hot path cheap. The
+main loop ``select``s on :meth:`Endpoint.fds` and calls :meth:`Endpoint.poll` on readable ones.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import tty
+from collections.abc import Iterator
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+READ_SIZE_BYTES = 65536
+"""Bytes read per readable descriptor per poll."""
+MAX_BACKLOG_BYTES = 1 << 20
+"""A stream peer that stops reading loses output beyond this backlog (as a full serial buffer)."""
+SYSTEM_ID = 1
+COMPONENT_ID = 1
+"""The emulated autopilot's MAVLink ids (ArduPilot defaults: SYSID_THISMAV 1, autopilot component 1)."""
+
+
+class EndpointError(Exception):
+    """An endpoint could not be opened; the message is one line naming the endpoint."""
+
+
+class _Peer:
+    """One byte stream (or datagram source) with its own MAVLink parser and packer."""
+
+    def __init__(self, fd: int, sock: socket.socket | None, address=None) -> None:
+        self.fd = fd
+        self.sock = sock
+        self.address = address
+        self.backlog = b""
+        self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.mav.robust_parsing = True
+
+    def pack(self, msg) -> bytes:
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        return buf
+
+
+class Endpoint:
+    """A MAVLink endpoint: ``send`` to every peer, ``poll`` for received messages."""
+
+    kind = ""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.peers: list[_Peer] = []
+        self.bad_frames = 0
+        """Undecodable or unknown frames received and ignored."""
+
+    def fds(self) -> list[int]:
+        return [peer.fd for peer in self.peers]
+
+    def send(self, msg) -> None:
+        for peer in list(self.peers):
+            self._write(peer, peer.pack(msg))
+
+    def poll(self, fd: int) -> Iterator[tuple[object, _Peer]]:
+        """Read what is waiting on ``fd`` and yield the decoded messages with the peer they came from."""
+        peer = next((p for p in self.peers if p.fd == fd), None)
+        if peer is None:
+            return
+        data = self._read(peer)
+        if not data:
+            return
+        try:
+            msgs = peer.mav.parse_buffer(data) or []
+        except mavlink.MAVError:
+            self.bad_frames += 1
+            return
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA" or msg.get_type().startswith("UNKNOWN"):
+                self.bad_frames += 1
+                continue
+            yield msg, peer
+
+    def reply(self, peer: _Peer, msg) -> None:
+        """Send to the one peer a request came from (COMMAND_ACK, PARAM_VALUE)."""
+        if peer in self.peers:
+            self._write(peer, peer.pack(msg))
+
+    def close(self) -> None:
+        for peer in self.peers:
+            self._close_peer(peer)
+        self.peers.clear()
+
+    # transport hooks
+    def _read(self, peer: _Peer) -> bytes:
+        try:
+            data = os.read(peer.fd, READ_SIZE_BYTES)
+        except BlockingIOError:
+            return b""
+        except OSError:
+            data = b""
+        if not data:
+            self._drop(peer)
+        return data
+
+    def _write(self, peer: _Peer, buf: bytes) -> None:
+        data = peer.backlog + buf
+        try:
+            sent = os.write(peer.fd, data)
+        except BlockingIOError:
+            sent = 0
+        except OSError:
+            self._drop(peer)
+            return
+        peer.backlog = data[sent:] if len(data) - sent <= MAX_BACKLOG_BYTES else b""
+
+    def _drop(self, peer: _Peer) -> None:
+        if peer in self.peers:
+            self.peers.remove(peer)
+            self._close_peer(peer)
+
+    def _close_peer(self, peer: _Peer) -> None:
+        if peer.sock is not None:
+            peer.sock.close()
+        else:
+            os.close(peer.fd)
+
+
+def _host_port(url: str, rest: str) -> tuple[str, int]:
+    host, sep, port = rest.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise EndpointError(f"endpoint {url!r}: expected HOST:PORT after the scheme")
+    return host, int(port)
+
+
+class UdpEndpoint(Endpoint):
+    """udpin (bind, answer every address heard from) or udpout (send to a fixed address)."""
+
+    def __init__(self, url: str, address: tuple[str, int], listen: bool) -> None:
+        super().__init__(url)
+        self.kind = "udpin" if listen else "udpout"
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        try:
+            if listen:
+                self.sock.bind(address)
+        except OSError as exc:
+            self.sock.close()
+            raise EndpointError(f"endpoint {url!r}: cannot bind {address[0]}:{address[1]}: {exc.strerror}") from None
+        self.destinations: dict[tuple[str, int], _Peer] = {}
+        if not listen:
+            self.destinations[address] = _Peer(self.sock.fileno(), None, address)
+        self.peers = list(self.destinations.values())
+
+    def fds(self) -> list[int]:
+        return [self.sock.fileno()]
+
+    def poll(self, fd: int) -> Iterator[tuple[object, _Peer]]:
+        while True:
+            try:
+                data, address = self.sock.recvfrom(READ_SIZE_BYTES)
+            except (BlockingIOError, ConnectionRefusedError):
+                return
+            peer = self.destinations.get(address)
+            if peer is None:
+                peer = self.destinations[address] = _Peer(self.sock.fileno(), None, address)
+                self.peers = list(self.destinations.values())
+            try:
+                msgs = peer.mav.parse_buffer(data) or []
+            except mavlink.MAVError:
+                self.bad_frames += 1
+                continue
+            for msg in msgs:
+                if msg.get_type() == "BAD_DATA" or msg.get_type().startswith("UNKNOWN"):
+                    self.bad_frames += 1
+                    continue
+                yield msg, peer
+
+    def _write(self, peer: _Peer, buf: bytes) -> None:
+        try:
+            self.sock.sendto(buf, peer.address)
+        except OSError:
+            pass  # datagrams are best effort; an absent listener is not an error
+
+    def close(self) -> None:
+        self.sock.close()
+        self.peers.clear()
+
+
+class TcpListenEndpoint(Endpoint):
+    """tcpin: listen and serve every client that connects (each with its own parser)."""
+
+    kind = "tcpin"
+
+    def __init__(self, url: str, address: tuple[str, int]) -> None:
+        super().__init__(url)
+        self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self.listener.bind(address)
+        except OSError as exc:
+            self.listener.close()
+            raise EndpointError(f"endpoint {url!r}: cannot listen on {address[0]}:{address[1]}: {exc.strerror}") from None
+        self.listener.listen(4)
+        self.listener.setblocking(False)
+
+    def fds(self) -> list[int]:
+        return [self.listener.fileno(), *super().fds()]
+
+    def poll(self, fd: int) -> Iterator[tuple[object, _Peer]]:
+        if fd == self.listener.fileno():
+            try:
+                sock, address = self.listener.accept()
+            except BlockingIOError:
+                return
+            sock.setblocking(False)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self.peers.append(_Peer(sock.fileno(), sock, address))
+            return
+        yield from super().poll(fd)
+
+    def close(self) -> None:
+        super().close()
+        self.listener.close()
+
+
+class TcpConnectEndpoint(Endpoint):
+    """tcp: connect out to a listening peer (e.g. a ground station or controller)."""
+
+    kind = "tcp"
+
+    def __init__(self, url: str, address: tuple[str, int]) -> None:
+        super().__init__(url)
+        try:
+            sock = socket.create_connection(address, timeout=5.0)
+        except OSError as exc:
+            raise EndpointError(f"endpoint {url!r}: cannot connect to {address[0]}:{address[1]}: {exc.strerror or exc}") from None
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.peers.append(_Peer(sock.fileno(), sock, address))
+
+
+class PtyEndpoint(Endpoint):
+    """A pseudo-terminal pair in raw mode: MAVLink on the master, clients open ``device`` as a serial port."""
+
+    kind = "pty"
+
+    def __init__(self) -> None:
+        master_fd, slave_fd = os.openpty()
+        tty.setraw(slave_fd)
+        os.set_blocking(master_fd, False)
+        self.device = os.ttyname(slave_fd)
+        super().__init__(f"pty:{self.device}")
+        # Keeping the slave open means a client closing it does not hang up the master (EIO).
+        self.slave_fd = slave_fd
+        self.peers.append(_Peer(master_fd, None))
+
+    def close(self) -> None:
+        super().close()
+        os.close(self.slave_fd)
+
+
+def open_endpoint(url: str) -> Endpoint:
+    """Open one endpoint from a pymavlink-style connection string; raise EndpointError on failure."""
+    scheme, sep, rest = url.partition(":")
+    if not sep:
+        raise EndpointError(f"endpoint {url!r}: expected udpin:, udpout:, tcpin: or tcp: followed by HOST:PORT")
+    if scheme in ("udpin", "udp"):  # pymavlink's plain "udp:" listens too
+        return UdpEndpoint(url, _host_port(url, rest), listen=True)
+    if scheme == "udpout":
+        return UdpEndpoint(url, _host_port(url, rest), listen=False)
+    if scheme == "tcpin":
+        return TcpListenEndpoint(url, _host_port(url, rest))
+    if scheme == "tcp":
+        return TcpConnectEndpoint(url, _host_port(url, rest))
+    raise EndpointError(f"endpoint {url!r}: unknown scheme {scheme!r} (use udpin, udpout, tcpin or tcp)")
+
+
+def close_all(endpoints: list[Endpoint]) -> None:
+    for endpoint in endpoints:
+        endpoint.close()
+
