@@ -155,7 +155,7 @@ class EstimatorParams:
     """Gyro bias uncertainty at start (a consumer MEMS gyro is within about 1 deg/s)."""
     compass_sigma_rad: float = 0.05
     """Compass heading noise, 1-sigma (about 3 deg: soft-iron and motor interference)."""
-    speed_accel_per_sqrt_s: float = 1.5
+    speed_accel_per_sqrt_s: float = 0.5
     """Random walk of the speed state between wheel readings, (m/s)/sqrt(s)."""
     wheel_speed_sigma_mps: float = 0.03
     """Wheel speed noise floor (encoder quantisation, timing), 1-sigma."""
@@ -175,6 +175,8 @@ class EstimatorParams:
     glitch_reset_s: float = 5.0
     """Fixes rejected continuously for this long mean the GPS really moved (or dead reckoning
     drifted): reset the position to the GPS, as EKF3 does past EK3_GLITCH_RAD."""
+    attitude_timeout_s: float = 0.5
+    """Without ATTITUDE for this long the turn rate comes from the wheel speed difference."""
     max_lag_s: float = 0.5
     """Readings older than the filter's time by up to this are fused with lag compensation;
     older ones are dropped."""
