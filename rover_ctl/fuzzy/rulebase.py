@@ -29,8 +29,9 @@ import numpy as np
 from rover_ctl.fuzzy.defuzzify import DEFUZZIFIERS
 from rover_ctl.fuzzy.membership import Variable
 
-ROWS_PER_CHUNK = 32768
-"""Rows evaluated at once in batch: about 2 kB of temporaries per row for the paper's base."""
+ROWS_PER_CHUNK = 4096
+"""Rows evaluated at once in batch: small enough for the ~2 kB of temporaries per row (paper's
+base) to stay in the CPU cache."""
 
 
 class RuleBaseError(ValueError):
@@ -107,6 +108,8 @@ class RuleBase:
         self._active = [v.max_active() for v in self.inputs]
         self._table_lists = [row.tolist() for row in self._table]
         self._n_sets_out = [len(v.sets) for v in self.outputs]
+        # Consequent per cell with "no rule" sent to a sink column past the output's sets.
+        self._slot_tables = [np.where(t < 0, n, t).astype(np.intp) for t, n in zip(self._table, self._n_sets_out)]
         points = [np.array([s.points for s in v.sets]) for v in self.outputs]
         # Paper defuzzifier terms per output set: bottom + core, slopes, peak (pure-Python path).
         self._area_terms = [
@@ -154,30 +157,39 @@ class RuleBase:
         return {name: values.reshape(shape) for name, values in result.items()}
 
     def set_strengths(self, columns: list[np.ndarray]) -> list[np.ndarray]:
-        """Per output, the strength of each of its sets: arrays of shape (rows, sets)."""
+        """Per output, the strength of each of its sets: arrays of shape (rows, sets).
+
+        Arrays are laid out (combinations, rows) so that every numpy loop runs along the rows.
+        """
         rows = columns[0].size
-        strength = np.ones((rows, 1))
-        cell = np.zeros((rows, 1), dtype=np.int64)
+        row_index = np.arange(rows)
+        strength = np.ones((1, rows), dtype=np.float32)
+        cell = np.zeros((1, rows), dtype=np.intp)
         for variable, x, active, stride in zip(self.inputs, columns, self._active, self._strides):
-            mu = variable.memberships(x)
-            if active < mu.shape[1]:
-                index = np.argsort(-mu, axis=1, kind="stable")[:, :active]
-                mu = np.take_along_axis(mu, index, axis=1)
+            mu = variable.memberships(x).T.astype(np.float32)  # sets x rows
+            if active < mu.shape[0]:
+                # The `active` strongest sets: the only ones that can be non-zero.
+                picked_index, picked_mu = [], []
+                for _ in range(active):
+                    best = mu.argmax(axis=0)
+                    picked_index.append(best)
+                    picked_mu.append(mu[best, row_index])
+                    mu[best, row_index] = -1.0
+                index, mu = np.array(picked_index), np.array(picked_mu)
             else:
-                index = np.broadcast_to(np.arange(mu.shape[1]), mu.shape)
+                index = np.broadcast_to(np.arange(mu.shape[0])[:, None], mu.shape)
             if self.and_method == "min":
-                strength = np.minimum(strength[:, :, None], mu[:, None, :]).reshape(rows, -1)
+                strength = np.minimum(strength[:, None, :], mu[None, :, :]).reshape(-1, rows)
             else:
-                strength = (strength[:, :, None] * mu[:, None, :]).reshape(rows, -1)
-            cell = (cell[:, :, None] + index[:, None, :] * stride).reshape(rows, -1)
+                strength = (strength[:, None, :] * mu[None, :, :]).reshape(-1, rows)
+            cell = (cell[:, None, :] + (index * stride)[None, :, :]).reshape(-1, rows)
         result = []
-        for table, n_sets in zip(self._table, self._n_sets_out):
-            consequent = table[cell].astype(np.int64)
-            consequent[consequent < 0] = n_sets  # a sink column for "no rule"
-            slots = np.arange(rows)[:, None] * (n_sets + 1) + consequent
-            aggregate = np.zeros(rows * (n_sets + 1))
+        for table, n_sets in zip(self._slot_tables, self._n_sets_out):
+            slots = table[cell]
+            slots += row_index * (n_sets + 1)
+            aggregate = np.zeros(rows * (n_sets + 1), dtype=np.float32)
             np.maximum.at(aggregate, slots.ravel(), strength.ravel())
-            result.append(aggregate.reshape(rows, n_sets + 1)[:, :n_sets])
+            result.append(aggregate.reshape(rows, n_sets + 1)[:, :n_sets].astype(np.float64))
         return result
 
     # ----- single (control loop) ---------------------------------------------------------------
