@@ -223,7 +223,7 @@ class GcsParams:
 class WheelControlParams:
     """Wheel-speed loop and RC mixing (``rover_ctl.wheel_control``)."""
 
-    full_output_rpm: float = 250.0
+    full_output_rpm: float = 220.0
     """Wheel speed at full motor output on flat ground: the feed-forward ``u = rpm / this``."""
     kp: float = 0.002
     """Proportional gain, motor output per rpm of error."""
@@ -270,6 +270,18 @@ class DaemonParams:
 
 
 @dataclass
+class NavigatorParams:
+    """The fuzzy navigator (``rover_ctl.navigator``): geometry and ranges to rule-base inputs."""
+
+    paper_range_units_per_m: float = 5.0
+    """Scale from metres to the obstacle units of a rule base whose obstacle inputs are not in
+    metres (the paper's 0..20 units): 5 maps the emulator's 4 m rangefinders onto 0..20."""
+    missing_range_m: float = 0.0
+    """Range assumed for a rangefinder the rule base reads but the caller did not pass (or NaN):
+    0 = that side is blocked, the safe reading the rangefinder failsafe relies on."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here."""
 
@@ -282,6 +294,7 @@ class Config:
     wheel_control: WheelControlParams = field(default_factory=WheelControlParams)
     daemon: DaemonParams = field(default_factory=DaemonParams)
     gcs: GcsParams = field(default_factory=GcsParams)
+    navigator: NavigatorParams = field(default_factory=NavigatorParams)
 
 
 def _coerce(value: Any, current: Any, where: str) -> Any:
