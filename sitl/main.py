@@ -230,6 +230,8 @@ class Emulator:
                     self.serve(self.pacer.wait_s(next_s))
                     if self.pacer.wait_s(next_s) <= 0:
                         break
+            if self.stop:
+                break
             self.vehicle.apply_outputs(t_s)
             self.clock.advance()
 

@@ -165,7 +165,8 @@ class MavlinkVehicle:
                 known = True
             return [self._param_value(msg.param_id)] if known else []
         elif kind == "TIMESYNC" and msg.tc1 == 0:
-            return [mavlink.MAVLink_timesync_message(int(t_s * 1e9), msg.ts1)]
+            # a request: answer with our clock (sim time), never 0, which would read as a request
+            return [mavlink.MAVLink_timesync_message(max(1, round(t_s * 1e9)), msg.ts1)]
         return []
 
     def _override(self, msg, t_s: float) -> None:
