@@ -228,7 +228,7 @@ def parse_plan(text: str, source: str) -> Parsed:
         return parsed
     try:
         if not isinstance(doc, dict):
-            raise _Refused(f"{source}: expected a JSON object at the top, got {type(doc).__name__}")
+            raise _Refused(f"{source}: expected a JSON object at the top, got {_JSON_NAMES.get(type(doc).__name__, type(doc).__name__)}")
         file_type = doc.get("fileType")
         if file_type != FILE_TYPE:
             raise _Refused(f"{source}: fileType is {json.dumps(file_type)}, expected \"{FILE_TYPE}\"")
@@ -259,6 +259,7 @@ def parse_plan(text: str, source: str) -> Parsed:
 
 
 def _json_number(value: float) -> float | None:
+    """NaN as null (as QGC writes it); a NaN coordinate then fails to load rather than to save."""
     return None if math.isnan(value) else value
 
 
@@ -280,16 +281,16 @@ def _item_json(seq: int, item: MissionItem) -> dict:
 def format_plan(mission: Mission) -> str:
     """The QGC .plan JSON text of a mission with its fence and rally points."""
     polygons = [
-        {"inclusion": p.inclusion, "polygon": [list(v) for v in p.vertices_latlon], "version": POLYGON_VERSION}
+        {"inclusion": p.inclusion, "polygon": [[_json_number(c) for c in v] for v in p.vertices_latlon], "version": POLYGON_VERSION}
         for p in mission.fence_polygons()
     ]
     circles = [
-        {"circle": {"center": list(c.center_latlon), "radius": c.radius_m}, "inclusion": c.inclusion, "version": CIRCLE_VERSION}
+        {"circle": {"center": [_json_number(v) for v in c.center_latlon], "radius": _json_number(c.radius_m)}, "inclusion": c.inclusion, "version": CIRCLE_VERSION}
         for c in mission.fence_circles()
     ]
     geofence: dict[str, Any] = {"circles": circles, "polygons": polygons, "version": GEOFENCE_VERSION}
     if mission.fence_return_point is not None:
-        geofence["breachReturn"] = list(mission.fence_return_point)
+        geofence["breachReturn"] = [_json_number(v) for v in mission.fence_return_point]
     home = mission.home or Home(0.0, 0.0, 0.0)
     doc = {
         "fileType": FILE_TYPE,
@@ -300,12 +301,12 @@ def format_plan(mission: Mission) -> str:
             "firmwareType": FIRMWARE_TYPE,
             "hoverSpeed": HOVER_SPEED_MPS,
             "items": [_item_json(seq, item) for seq, item in enumerate(mission.items, start=1)],
-            "plannedHomePosition": [home.lat_deg, home.lon_deg, home.alt_m],
+            "plannedHomePosition": [_json_number(v) for v in (home.lat_deg, home.lon_deg, home.alt_m)],
             "vehicleType": VEHICLE_TYPE,
             "version": MISSION_VERSION,
         },
         "rallyPoints": {
-            "points": [[p.lat_deg, p.lon_deg, p.alt_m] for p in mission.rally],
+            "points": [[_json_number(v) for v in (p.lat_deg, p.lon_deg, p.alt_m)] for p in mission.rally],
             "version": RALLY_VERSION,
         },
         "version": PLAN_VERSION,

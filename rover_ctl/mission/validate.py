@@ -74,7 +74,7 @@ def _check_position(item: MissionItem, where: str, errors: list[str], required: 
             if required:
                 errors.append(f"{where}: {name} is missing (NaN)")
         elif not -limit <= value <= limit:
-            errors.append(f"{where}: {name} {value:g} out of range [-{limit:g}, {limit:g}]")
+            errors.append(f"{where}: {name} {value:.10g} out of range [-{limit:g}, {limit:g}]")
 
 
 def _check_mission(mission: Mission, max_speed_mps: float, label, errors: list[str], warnings: list[str]) -> None:

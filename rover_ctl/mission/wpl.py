@@ -82,7 +82,7 @@ def parse_wpl(text: str, source: str) -> Parsed:
     lines = text.splitlines()
     header = lines[0].strip().lstrip("\ufeff") if lines else ""
     if header != HEADER:
-        parsed.errors.append(f"{source}:1: bad header {header!r}: expected {HEADER!r}")
+        parsed.errors.append(f"{source}:1: bad header {header[:40]!r}: expected {HEADER!r}")
         return parsed
 
     rows: list[tuple[str, list[float]]] = []
