@@ -1,0 +1,227 @@
+"""Failsafe decisions from message ages, estimator health, the fence test and progress.
+
+Pure: the daemon measures (ages in vehicle time, never the wall clock), this module decides. Every
+control step the daemon calls ``Failsafes.update(now_s, FailsafeInputs) -> FailsafeDecision`` and
+applies ``decision.action``; docs/failsafes.md lists each failsafe's trigger, action, recovery
+and parameters.
+
+Hysteresis: a failsafe triggers as soon as its condition holds (after its own delay where it has
+one) and clears only after the condition has been gone for ``recovery_s`` continuously, so a
+flapping link or sensor keeps it active instead of making it chatter. Each trigger and each
+clear is reported once as an event for STATUSTEXT (text <= 50 characters, MAV_SEVERITY).
+
+Actions, by precedence when several failsafes are active:
+    NEUTRAL  > HOLD  > RTL  > BACK_OFF  > NONE
+NEUTRAL, HOLD and BACK_OFF are levels: apply them while they are reported. RTL is reported while
+its cause lasts; the daemon switches its mode to RTL when it first sees it, and that mode stays
+until the GCS changes it (ArduPilot's failsafe mode change), even after the cause is gone.
+
+Inputs are the daemon's view: ``driving`` is the mode the GCS selected (AUTO or RTL, armed), not
+changed by failsafe actions; ``commanded_speed_mps`` is the navigator's forward setpoint (0 while
+a failsafe holds). Leaving the driving modes forgets the stuck state.
+
+API:
+    Failsafes(params).update(now_s, inputs: FailsafeInputs) -> FailsafeDecision
+    FailsafeDecision.action: Action, .reasons (active failsafe names), .events (new this step),
+        .blocked_orientations (silent rangefinders: the navigator treats those sides as blocked),
+        .dead_reckoning, .replan (once, when a back-off ends: re-plan from here)
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from rover_ctl.config import FailsafeParams
+
+EN = tuple[float, float]
+
+
+class Action(enum.IntEnum):
+    """What the daemon must do; a higher value wins."""
+
+    NONE = 0
+    BACK_OFF = 1
+    """Drive backwards at ``back_off_speed_mps`` (stuck)."""
+    RTL = 2
+    HOLD = 3
+    """Stop and stay (motors commanded to zero speed)."""
+    NEUTRAL = 4
+    """Motors neutral and hold: no point commanding a vehicle that does not answer."""
+
+
+class Severity(enum.IntEnum):
+    """MAV_SEVERITY values used here."""
+
+    CRITICAL = 2
+    WARNING = 4
+    INFO = 6
+
+
+GCS_ACTIONS = {"continue": Action.NONE, "hold": Action.HOLD, "rtl": Action.RTL}
+FENCE_ACTIONS = {"hold": Action.HOLD, "rtl": Action.RTL}
+
+
+@dataclass(frozen=True)
+class FailsafeInputs:
+    vehicle_age_s: float
+    """Since the last message of any kind on the vehicle link."""
+    gcs_age_s: float = math.inf
+    """Since the last GCS heartbeat; inf while none was ever seen (no GCS failsafe then)."""
+    gps_age_s: float = 0.0
+    """Since the last GPS fix with fix_type >= 2."""
+    range_ages_s: Mapping[int, float] = field(default_factory=dict)
+    """Age of the last DISTANCE_SENSOR per orientation (0 front, 2 right, 4 back, 6 left, ...)."""
+    estimator_healthy: bool = True
+    inside_fence: bool = True
+    """``Planner.is_inside_fence`` of the estimated position."""
+    driving: bool = False
+    commanded_speed_mps: float = 0.0
+    position_en: EN | None = None
+    """Estimated position, for the stuck test."""
+
+
+@dataclass(frozen=True)
+class FailsafeEvent:
+    text: str
+    severity: Severity
+
+
+@dataclass(frozen=True)
+class FailsafeDecision:
+    action: Action
+    reasons: tuple[str, ...]
+    events: tuple[FailsafeEvent, ...]
+    blocked_orientations: frozenset[int]
+    dead_reckoning: bool
+    replan: bool
+
+
+class _Latch:
+    """Active once ``bad`` has held for ``trigger_s``; inactive once it has been false for ``recovery_s``."""
+
+    def __init__(self, trigger_s: float, recovery_s: float) -> None:
+        self.trigger_s, self.recovery_s = trigger_s, recovery_s
+        self.active = False
+        self._since: float | None = None  # start of the current run of bad (or good, when active)
+
+    def update(self, now_s: float, bad: bool) -> bool | None:
+        """Returns True on the trigger edge, False on the clear edge, None otherwise."""
+        if bad != self.active:
+            self._since = now_s if self._since is None else self._since
+            if now_s - self._since >= (self.trigger_s if bad else self.recovery_s):
+                self.active, self._since = bad, None
+                return bad
+        else:
+            self._since = None
+        return None
+
+
+class _Stuck(enum.Enum):
+    WATCHING = "watching"
+    BACKING_OFF = "backing_off"
+    GAVE_UP = "gave_up"
+
+
+class Failsafes:
+    """All failsafes with their state (see the module docstring)."""
+
+    def __init__(self, params: FailsafeParams) -> None:
+        if params.gcs_action not in GCS_ACTIONS:
+            raise ValueError(f"failsafe.gcs_action: {params.gcs_action!r} is not one of {', '.join(GCS_ACTIONS)}")
+        if params.fence_action not in FENCE_ACTIONS:
+            raise ValueError(f"failsafe.fence_action: {params.fence_action!r} is not one of {', '.join(FENCE_ACTIONS)}")
+        self.params = params
+        r = params.recovery_s
+        self._vehicle = _Latch(0.0, r)
+        self._gcs = _Latch(0.0, r)
+        self._gps = _Latch(0.0, r)
+        self._dead_reckoning_over = _Latch(0.0, r)
+        self._estimator = _Latch(params.estimator_unhealthy_s, r)
+        self._fence = _Latch(0.0, r)
+        self._ranges: dict[int, _Latch] = {}
+        self._stuck = _Stuck.WATCHING
+        self._tries = 0
+        self._anchor: tuple[float, EN] | None = None  # (time, position) progress is measured from
+        self._back_off_until_s = 0.0
+        self._free_from: EN | None = None  # where the last back-off ended
+
+    def update(self, now_s: float, inputs: FailsafeInputs) -> FailsafeDecision:
+        p = self.params
+        events: list[FailsafeEvent] = []
+        actions: dict[str, Action] = {}
+
+        def check(latch: _Latch, name: str, bad: bool, action: Action, what: str) -> None:
+            edge = latch.update(now_s, bad)
+            if edge is True:
+                severity = Severity.CRITICAL if action >= Action.HOLD else Severity.WARNING
+                events.append(FailsafeEvent(f"FS {name}: {what}"[:50], severity))
+            elif edge is False:
+                events.append(FailsafeEvent(f"FS {name} cleared"[:50], Severity.INFO))
+            if latch.active:
+                actions[name] = action
+
+        check(self._vehicle, "vehicle link", inputs.vehicle_age_s > p.vehicle_timeout_s, Action.NEUTRAL, "motors neutral")
+        gcs_action = GCS_ACTIONS[p.gcs_action]
+        gcs_bad = math.isfinite(inputs.gcs_age_s) and inputs.gcs_age_s > p.gcs_timeout_s
+        check(self._gcs, "GCS lost", gcs_bad, gcs_action, p.gcs_action)
+        check(self._gps, "GPS lost", inputs.gps_age_s > p.gps_timeout_s, Action.NONE, "dead reckoning")
+        dr_over = inputs.gps_age_s > p.gps_timeout_s + p.dead_reckoning_max_s
+        check(self._dead_reckoning_over, "GPS lost too long", dr_over, Action.HOLD, "hold")
+        check(self._estimator, "estimator", not inputs.estimator_healthy, Action.HOLD, "unhealthy, hold")
+        fence_action = FENCE_ACTIONS[p.fence_action]
+        check(self._fence, "fence breach", not inputs.inside_fence, fence_action, p.fence_action)
+
+        ages = {o: math.inf for o in p.required_rangefinders} | dict(inputs.range_ages_s)
+        for orientation in sorted(ages):
+            rf = self._ranges.setdefault(orientation, _Latch(0.0, p.recovery_s))
+            silent = ages[orientation] > p.rangefinder_timeout_s
+            check(rf, f"rangefinder {orientation}", silent, Action.NONE, "silent, side blocked")
+        blocked = frozenset(o for o, rf in self._ranges.items() if rf.active)
+
+        replan = self._stuck_step(now_s, inputs, events, actions)
+
+        action = max(actions.values(), default=Action.NONE)
+        reasons = tuple(actions)
+        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan)
+
+    def _stuck_step(self, now_s: float, inputs: FailsafeInputs, events: list[FailsafeEvent], actions: dict[str, Action]) -> bool:
+        """Commanded motion without progress: back off, re-plan; after ``stuck_max_tries``, hold."""
+        p = self.params
+        if not inputs.driving or inputs.position_en is None:
+            if self._stuck is not _Stuck.WATCHING:
+                events.append(FailsafeEvent("FS stuck cleared", Severity.INFO))
+            self._stuck, self._tries, self._anchor, self._free_from = _Stuck.WATCHING, 0, None, None
+            return False
+        here = inputs.position_en
+        if self._stuck is _Stuck.GAVE_UP:
+            actions["stuck"] = Action.HOLD
+            return False
+        if self._stuck is _Stuck.BACKING_OFF:
+            if now_s < self._back_off_until_s:
+                actions["stuck"] = Action.BACK_OFF
+                return False
+            self._stuck, self._anchor, self._free_from = _Stuck.WATCHING, None, here
+            return True
+        if self._free_from is not None and math.dist(here, self._free_from) >= p.stuck_clear_m:
+            self._tries, self._free_from = 0, None
+        if inputs.commanded_speed_mps <= p.stuck_min_command_mps:
+            self._anchor = None
+            return False
+        if self._anchor is None or math.dist(here, self._anchor[1]) >= p.stuck_progress_m:
+            self._anchor = (now_s, here)
+            return False
+        if now_s - self._anchor[0] < p.stuck_window_s:
+            return False
+        self._tries += 1
+        if self._tries > p.stuck_max_tries:
+            self._stuck = _Stuck.GAVE_UP
+            events.append(FailsafeEvent("FS stuck: gave up, hold", Severity.CRITICAL))
+            actions["stuck"] = Action.HOLD
+            return False
+        self._stuck, self._back_off_until_s = _Stuck.BACKING_OFF, now_s + p.back_off_s
+        events.append(FailsafeEvent(f"FS stuck: backing off ({self._tries}/{p.stuck_max_tries})", Severity.WARNING))
+        actions["stuck"] = Action.BACK_OFF
+        return False
