@@ -304,9 +304,10 @@ class GcsLink:
             return
         if kind in MissionService.HANDLED:
             before = self.service.mission
-            self._send_all(self.service.handle(msg, now_s))
-            if self.service.mission is not before:
+            replies = self.service.handle(msg, now_s)
+            if self.service.mission is not before:  # tell the daemon before the GCS hears the ACK
                 self.handlers.mission_changed(self.service.mission, self._changed_type)
+            self._send_all(replies)
             return
         if getattr(msg, "target_system", 0) not in (0, self.params.system_id):
             return
@@ -348,7 +349,8 @@ class GcsLink:
             return self.store.load()
         except StoreError as exc:
             aside = self.store.quarantine()
-            self.store_error = f"{exc}; moved to {aside}, starting with no mission"
+            kept = f"moved to {aside}" if aside else "left as it is"
+            self.store_error = f"{exc}; {kept}, starting with no mission"
             log.error("%s", self.store_error)
             return Mission()
 

@@ -102,8 +102,10 @@ class MissionStore:
         finally:
             os.close(dir_fd)
 
-    def quarantine(self) -> Path:
-        """Move an unreadable store aside and return where it went."""
+    def quarantine(self) -> Path | None:
+        """Move an unreadable store file aside and return where it went (None: no such file)."""
+        if not self.path.is_file():
+            return None
         target = self.path.with_name(self.path.name + ".corrupt")
         n = 0
         while target.exists():

@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
-from pymavlink.dialects.v20 import ardupilotmega as mav
+import os
+import select
+import threading
+import time
 
-from rover_ctl.mission.model import Home, Mission, MissionItem
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
+
+from rover_ctl.gcs import GcsLink  # noqa: E402
+from rover_ctl.mission.model import Home, Mission, MissionItem  # noqa: E402
 
 HOME = Home(-35.363261, 149.165230, 584.0)
 MAVPROXY = (255, 230)
@@ -26,3 +34,69 @@ def sample_mission(n: int = 4) -> Mission:
              for dy, dx in ((-1e-3, -1e-3), (1e-3, -1e-3), (1e-3, 1e-3), (-1e-3, 1e-3))]  # fmt: skip
     rally = [MissionItem(5100, x=HOME.lat_deg, y=HOME.lon_deg + 2e-4, z=5.0)]
     return Mission(items=items, home=HOME, fence=fence, rally=rally)
+
+
+class LinkThread:
+    """A GcsLink polled by its own thread, which creates and owns the link's socket.
+
+    ``with LinkThread(url, store=...) as lt:`` starts it and waits until it listens; ``lt.link``
+    is the GcsLink (read its state from the test thread; do not send on it).
+    """
+
+    def __init__(self, url: str, **kwargs) -> None:
+        self.url = url
+        self.kwargs = kwargs
+        self.link = None
+        self._ready = threading.Event()
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="gcs-link", daemon=True)
+
+    def _run(self) -> None:
+        try:
+            self.link = GcsLink(self.url, **self.kwargs)
+            self._ready.set()
+            sock = self.link.conn.port
+            while not self._stop.is_set():
+                self.link.poll(time.monotonic())
+                select.select([sock], [], [], POLL_WAIT_S)  # wakes on a datagram, or for timeouts
+        except BaseException as exc:  # surfaced by __enter__/__exit__
+            self._error = exc
+            self._ready.set()
+        finally:
+            if self.link is not None:
+                self.link.close()
+
+    def __enter__(self) -> "LinkThread":
+        self._thread.start()
+        assert self._ready.wait(5.0), "GcsLink did not start"
+        if self._error:
+            raise self._error
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+        if self._error:
+            raise self._error
+
+
+POLL_WAIT_S = 0.01
+"""Longest the link thread sleeps in select() between polls (heartbeat and retry timers)."""
+
+
+def gcs(port: int, sender: tuple[int, int] = MAVPROXY):
+    """A raw pymavlink ground station sending to the link's udpin port."""
+    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=sender[0], source_component=sender[1], dialect="ardupilotmega")
+    conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+    return conn
+
+
+def expect(conn, kind: str, timeout_s: float = 3.0, **fields):
+    """The next ``kind`` message whose fields match ``fields`` (fails the test after timeout_s)."""
+    end = time.monotonic() + timeout_s
+    while (left := end - time.monotonic()) > 0:
+        msg = conn.recv_match(type=kind, blocking=True, timeout=left)
+        if msg is not None and all(getattr(msg, k) == v for k, v in fields.items()):
+            return msg
+    raise AssertionError(f"no {kind} {fields or ''} within {timeout_s} s")

@@ -1,0 +1,228 @@
+"""GcsLink over real UDP sockets: heartbeat, commands, params, the mission service, the store."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from mission_protocol.helpers import HOME, MAVPROXY, MAVSDK, LinkThread, expect, gcs
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from rover_ctl.config import Config, GcsParams
+from rover_ctl.gcs import CAPABILITIES, DefaultHandlers, GcsLink, RoverMode
+from rover_ctl.mission.client import MissionClient, MissionClientError
+from rover_ctl.mission.model import Mission
+from rover_ctl.mission.store import MissionStore
+
+FAST = GcsParams(client_retry_s=0.2, client_retries=10, heartbeat_period_s=0.2)
+
+
+@pytest.fixture
+def url(udp_port: int) -> str:
+    return f"udpin:127.0.0.1:{udp_port}"
+
+
+def client(port: int, sender=MAVPROXY) -> MissionClient:
+    return MissionClient(f"udpout:127.0.0.1:{port}", FAST, *sender)
+
+
+def command(conn, cmd: int, *params: float):
+    p = list(params) + [0.0] * (7 - len(params))
+    conn.mav.command_long_send(1, 1, cmd, 0, *p)
+    return expect(conn, "COMMAND_ACK", command=cmd)
+
+
+def test_heartbeat_is_a_rover_autopilot_from_1_1(url, udp_port):
+    with LinkThread(url, params=FAST):
+        conn = gcs(udp_port)
+        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        hb = expect(conn, "HEARTBEAT")
+        assert (hb.get_srcSystem(), hb.get_srcComponent()) == (1, 1)
+        assert hb.type == mav.MAV_TYPE_GROUND_ROVER and hb.autopilot == mav.MAV_AUTOPILOT_ARDUPILOTMEGA
+        assert hb.custom_mode == RoverMode.HOLD and hb.base_mode & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        assert not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+        assert hb.get_msgbuf()[0] == 0xFD  # MAVLink 2 start byte
+
+
+def test_commands_are_dispatched_and_acked_to_the_sender(url, udp_port):
+    handlers = DefaultHandlers(home=HOME)
+    with LinkThread(url, params=FAST, handlers=handlers) as lt:
+        conn = gcs(udp_port, MAVSDK)
+        ack = command(conn, mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED and (ack.target_system, ack.target_component) == MAVSDK
+        expect(conn, "HEARTBEAT", custom_mode=RoverMode.HOLD)
+        hb = expect(conn, "HEARTBEAT")
+        assert hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+        assert command(conn, mav.MAV_CMD_DO_SET_MODE, 1, RoverMode.GUIDED).result == mav.MAV_RESULT_ACCEPTED
+        assert command(conn, mav.MAV_CMD_DO_SET_MODE, 1, 99).result == mav.MAV_RESULT_DENIED
+        assert command(conn, mav.MAV_CMD_MISSION_START).result == mav.MAV_RESULT_DENIED  # no mission
+        assert command(conn, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH).result == mav.MAV_RESULT_ACCEPTED
+        assert handlers.custom_mode == RoverMode.RTL
+        assert command(conn, mav.MAV_CMD_DO_FLIGHTTERMINATION, 1).result == mav.MAV_RESULT_UNSUPPORTED
+        conn.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, RoverMode.MANUAL)
+        expect(conn, "HEARTBEAT", custom_mode=RoverMode.MANUAL)
+        conn.mav.command_int_send(1, 1, 0, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert expect(conn, "COMMAND_ACK", command=mav.MAV_CMD_COMPONENT_ARM_DISARM).result == mav.MAV_RESULT_ACCEPTED
+        assert not lt.link.handlers.state().armed
+
+
+def test_autopilot_version_and_home_position_on_request(url, udp_port):
+    with LinkThread(url, params=FAST, handlers=DefaultHandlers(home=HOME)):
+        conn = gcs(udp_port)
+        assert command(conn, mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION).result == mav.MAV_RESULT_ACCEPTED
+        version = expect(conn, "AUTOPILOT_VERSION")
+        assert version.capabilities == CAPABILITIES
+        for flag in ("MISSION_INT", "MISSION_FENCE", "MISSION_RALLY", "COMMAND_INT", "MAVLINK2"):
+            assert version.capabilities & getattr(mav, f"MAV_PROTOCOL_CAPABILITY_{flag}")
+        assert not version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+        for request in ((mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION), (mav.MAV_CMD_GET_HOME_POSITION,)):
+            assert command(conn, *request).result == mav.MAV_RESULT_ACCEPTED
+            home = expect(conn, "HOME_POSITION")
+            assert (home.latitude, home.longitude, home.altitude) == (-353632610, 1491652300, 584000)
+        assert command(conn, mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_BATTERY_STATUS).result == mav.MAV_RESULT_UNSUPPORTED
+
+
+def test_home_position_fails_without_a_home(url, udp_port):
+    with LinkThread(url, params=FAST):
+        conn = gcs(udp_port)
+        assert command(conn, mav.MAV_CMD_GET_HOME_POSITION).result == mav.MAV_RESULT_FAILED
+
+
+def test_params_list_read_and_set_reach_the_config(url, udp_port):
+    config = Config()
+    with LinkThread(url, params=FAST, handlers=DefaultHandlers(config)):
+        conn = gcs(udp_port)
+        conn.mav.param_request_list_send(1, 1)
+        values = {}
+        while len(values) < 6:
+            p = expect(conn, "PARAM_VALUE")
+            values[p.param_id] = p
+        assert {"SYSID_THISMAV", "WP_RADIUS", "WP_SPEED", "RTL_SPEED", "FS_GCS_TIMEOUT", "FS_ACTION"} <= set(values)
+        assert values["WP_RADIUS"].param_value == config.executor.acceptance_radius_m
+        assert sorted(v.param_index for v in values.values()) == list(range(values["WP_RADIUS"].param_count))
+        conn.mav.param_set_send(1, 1, b"WP_RADIUS", 3.5, mav.MAV_PARAM_TYPE_REAL32)
+        assert expect(conn, "PARAM_VALUE", param_id="WP_RADIUS").param_value == 3.5
+        assert config.executor.acceptance_radius_m == 3.5
+        conn.mav.param_set_send(1, 1, b"FS_ACTION", 2, mav.MAV_PARAM_TYPE_REAL32)
+        expect(conn, "PARAM_VALUE", param_id="FS_ACTION", param_value=2.0)
+        assert config.failsafe.gcs_action == "hold"
+        conn.mav.param_set_send(1, 1, b"SYSID_THISMAV", 7, mav.MAV_PARAM_TYPE_REAL32)  # read-only: echoes 1
+        assert expect(conn, "PARAM_VALUE", param_id="SYSID_THISMAV").param_value == 1.0
+        conn.mav.param_request_read_send(1, 1, b"WP_SPEED", -1)
+        assert expect(conn, "PARAM_VALUE", param_id="WP_SPEED").param_value == pytest.approx(config.executor.cruise_speed_mps)
+
+
+def test_upload_download_clear_and_mission_changed(url, udp_port, mission):
+    handlers = DefaultHandlers()
+    with LinkThread(url, params=FAST, handlers=handlers) as lt, client(udp_port, MAVSDK) as c:
+        assert c.connect() == (1, 1)
+        assert c.upload(mission) == [0, 1, 2]
+        assert lt.link.service.mission.same_as(mission) and handlers.mission.same_as(mission)
+        assert c.download().same_as(mission)
+        c.clear(1)
+        assert lt.link.service.mission.fence == [] and handlers.mission.fence == []
+        c.clear(255)
+        assert c.download().same_as(Mission(home=mission.home))
+
+
+def test_mission_start_current_and_reached(url, udp_port, mission):
+    handlers = DefaultHandlers()
+    with LinkThread(url, params=FAST, handlers=handlers) as lt, client(udp_port) as c:
+        c.connect()
+        c.upload(mission)
+        conn = c.conn
+        ack = command(conn, mav.MAV_CMD_MISSION_START)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED and handlers.custom_mode == RoverMode.AUTO
+        conn.mav.mission_set_current_send(1, 1, 3)
+        assert expect(conn, "MISSION_CURRENT", seq=3).total == len(mission.items)
+        assert handlers.current_seq == 3
+        assert command(conn, mav.MAV_CMD_DO_SET_MISSION_CURRENT, 2).result == mav.MAV_RESULT_ACCEPTED
+        assert command(conn, mav.MAV_CMD_DO_SET_MISSION_CURRENT, 40).result == mav.MAV_RESULT_DENIED
+        assert lt.link.service.current_seq == 2
+
+
+def test_a_restarted_link_keeps_its_mission(url, udp_port, mission, tmp_path):
+    store = MissionStore(tmp_path / "state" / "mission.json")
+    with LinkThread(url, params=FAST, store=store), client(udp_port) as c:
+        c.upload(mission)
+    assert store.load().same_as(mission)
+    handlers = DefaultHandlers()
+    with LinkThread(url, params=FAST, store=store, handlers=handlers), client(udp_port) as c:
+        assert handlers.mission.same_as(mission)  # the daemon is told at start
+        assert c.download().same_as(mission)
+
+
+def test_a_corrupt_store_is_moved_aside_and_the_link_starts_empty(tmp_path, url):
+    path = tmp_path / "mission.json"
+    path.write_text('{"format": "rover_ctl-mission-store", "version": 1, "items": [', encoding="utf-8")
+    link = GcsLink(url, FAST, store=MissionStore(path))
+    try:
+        assert link.service.mission.same_as(Mission())
+        assert "corrupt mission store" in link.store_error and "mission.json.corrupt" in link.store_error
+        assert (tmp_path / "mission.json.corrupt").read_text().endswith('"items": [')
+        assert not path.exists()
+    finally:
+        link.close()
+
+
+def test_a_store_that_cannot_be_written_refuses_the_upload(tmp_path, url, udp_port, mission):
+    blocker = tmp_path / "not_a_dir"
+    blocker.write_text("")
+    with LinkThread(url, params=FAST, store=MissionStore(blocker / "mission.json")) as lt, client(udp_port) as c:
+        with pytest.raises(MissionClientError, match="mission upload refused by the vehicle: MAV_MISSION_ERROR"):
+            c.upload(mission)
+        assert lt.link.service.mission.same_as(Mission())
+
+
+def test_data_stream_and_message_interval_set_telemetry_rates(url):
+    link = GcsLink(url, FAST)
+    try:
+        assert link.send_global_position_int(0.0, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 0)
+        assert not link.send_global_position_int(0.1, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 100)  # 4 Hz default
+        assert link.send_global_position_int(0.25, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 250)
+        link._set_interval(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000)  # 20 Hz
+        assert link.send_global_position_int(0.31, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 310)
+        link._set_interval(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, -1)
+        assert not link.send_global_position_int(9.0, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 9000)
+        assert link._set_interval(mav.MAVLINK_MSG_ID_BATTERY_STATUS, 1000) == mav.MAV_RESULT_DENIED
+    finally:
+        link.close()
+
+
+def test_request_data_stream_over_the_wire(url, udp_port):
+    with LinkThread(url, params=FAST) as lt:
+        conn = gcs(udp_port)
+        conn.mav.request_data_stream_send(1, 1, mav.MAV_DATA_STREAM_EXTRA1, 25, 1)
+        conn.mav.request_data_stream_send(1, 1, mav.MAV_DATA_STREAM_POSITION, 0, 0)
+        conn.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, mav.MAVLINK_MSG_ID_SYS_STATUS, 200_000, 0, 0, 0, 0, 0)
+        expect(conn, "COMMAND_ACK", command=mav.MAV_CMD_SET_MESSAGE_INTERVAL, result=mav.MAV_RESULT_ACCEPTED)
+        rates = lt.link.rates.interval_s
+        assert rates[mav.MAVLINK_MSG_ID_ATTITUDE] == pytest.approx(0.04)
+        assert rates[mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT] is None
+        assert rates[mav.MAVLINK_MSG_ID_SYS_STATUS] == pytest.approx(0.2)
+
+
+def test_long_statustext_is_chunked(url, udp_port):
+    link = GcsLink(url, FAST)
+    try:
+        conn = gcs(udp_port)
+        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        while link.conn.recv_msg() is None:  # learn the ground station's address
+            pass
+        text = "obstacle ahead " * 7
+        link.send_statustext(text, mav.MAV_SEVERITY_WARNING)
+        chunks = [expect(conn, "STATUSTEXT") for _ in range(3)]
+        assert len({c.id for c in chunks}) == 1 and chunks[0].id > 0
+        assert [c.chunk_seq for c in chunks] == [0, 1, 2]
+        assert "".join(c.text for c in chunks) == text
+    finally:
+        link.close()
+
+
+def test_store_round_trip_keeps_nan_params(tmp_path, mission):
+    store = MissionStore(tmp_path / "m.json")
+    weird = Mission(items=[*mission.items, mission.items[0].__class__(16, param4=float("nan"), x=1.0, y=2.0)], home=None)
+    store.save(weird)
+    assert store.load().same_as(weird)
+    assert json.loads((tmp_path / "m.json").read_text().replace("NaN", "null"))["format"] == "rover_ctl-mission-store"
+    assert list(tmp_path.iterdir()) == [tmp_path / "m.json"]  # no temp file left
