@@ -4,7 +4,8 @@ their rates.
 
 Collisions: every ``collision_check_s`` the rectangular footprint is tested against the obstacles
 near it. Driving into an obstacle is refused: the rover is put back where it was at the last check
-and stops dead (the wheels keep being driven, so the encoders see the slip). An obstacle moving
+and stops dead, so motors that keep pushing stall (stall current, encoders creep by at most the
+travel of one check interval each time). An obstacle moving
 into a stationary rover is reported but not resolved. Each contact gives one ``collision`` event;
 it ends when the footprint is ``contact_release_m`` clear of that obstacle.
 """
