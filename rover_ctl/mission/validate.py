@@ -49,6 +49,12 @@ def command_name(command: int) -> str:
     return entry.name.removeprefix("MAV_CMD_") if entry is not None else f"command {command}"
 
 
+def describe(command: int) -> str:
+    """``DO_SET_SERVO (183)``, or ``command 4242`` for a number MAVLink does not define."""
+    name = command_name(command)
+    return name if name.startswith("command ") else f"{name} ({command})"
+
+
 def _label(labels: Mapping[tuple[MissionType, int], str] | None, kind: MissionType, index: int) -> str:
     if labels is not None and (kind, index) in labels:
         return labels[(kind, index)]
@@ -103,7 +109,7 @@ def _check_mission(mission: Mission, max_speed_mps: float, label, errors: list[s
                 errors.append(f"{where}: {command_name(command)} time {item.param1:g} s must be >= 0")
         elif command not in SUPPORTED_COMMANDS:
             instead = INSTEAD.get(command, DEFAULT_INSTEAD)
-            warnings.append(f"{where}: {command_name(command)} ({command}) is not supported by this rover: skipped, {instead}")
+            warnings.append(f"{where}: {describe(command)} is not supported by this rover: skipped, {instead}")
 
 
 def _check_fence(mission: Mission, label, errors: list[str]) -> None:
@@ -125,7 +131,7 @@ def _check_fence(mission: Mission, label, errors: list[str]) -> None:
         if item.command in FENCE_CIRCLE_COMMANDS and not (math.isfinite(item.param1) and item.param1 > 0.0):
             errors.append(f"{where}: fence circle radius {item.param1:g} m must be > 0")
         elif item.command not in FENCE_POLYGON_COMMANDS | FENCE_CIRCLE_COMMANDS | {Cmd.NAV_FENCE_RETURN_POINT}:
-            errors.append(f"{where}: {command_name(item.command)} ({item.command}) is not a fence item")
+            errors.append(f"{where}: {describe(item.command)} is not a fence item")
     returns = sum(item.command == Cmd.NAV_FENCE_RETURN_POINT for item in fence)
     if returns > 1:
         errors.append(f"{label(MissionType.FENCE, 0)}: the fence has {returns} return points (at most 1)")
@@ -135,7 +141,7 @@ def _check_rally(mission: Mission, label, errors: list[str]) -> None:
     for index, item in enumerate(mission.rally):
         where = label(MissionType.RALLY, index)
         if item.command != Cmd.NAV_RALLY_POINT:
-            errors.append(f"{where}: {command_name(item.command)} ({item.command}) is not a rally point")
+            errors.append(f"{where}: {describe(item.command)} is not a rally point")
         _check_position(item, where, errors, required=True)
 
 
