@@ -10,7 +10,10 @@ set of that input (the expansion a complete rule table would spell out), so its 
 ``AND(its antecedents, membership of that input's set)``. The rule base therefore compiles to
 one table ``consequent[output][cell]`` over the cells ``(set of input 1, ..., set of input n)``,
 with ``-1`` where no rule concludes that output. Two rules concluding different sets of one output
-in the same cell conflict and are refused when the rule base is built.
+in the same cell are read as a decision list: the earlier rule decides that cell (the later one
+still decides the cells it alone covers), so a general rule can follow specific exceptions.
+Refused when the rule base is built: two rules with the same conditions and different
+conclusions (a conflict), and a rule that decides no cell at all (shadowed by earlier rules).
 
 Compiled evaluation uses sparsity: at any point of a universe made of overlapping
 piecewise-linear sets only a few sets (``Variable.max_active()``, 2 for a usual partition) are
@@ -79,23 +82,33 @@ class RuleBase:
         self._table = np.full((len(self.outputs), n_cells), -1, dtype=np.int16)
         self._cell_rule = np.full(n_cells, -1, dtype=np.int32)
         owner = np.full((len(self.outputs), n_cells), -1, dtype=np.int32)
+        first_with: dict[tuple[int | None, ...], int] = {}
         for index, rule in enumerate(self.rules):
+            earlier = first_with.setdefault(rule.antecedent, index)
+            if earlier != index:
+                other = self.rules[earlier]
+                for o, (k, j) in enumerate(zip(rule.consequent, other.consequent)):
+                    if k is not None and j is not None and k != j:
+                        raise RuleBaseError(
+                            f"{rule.where}: conflicts with {other.where}: same conditions, {self.outputs[o].name} "
+                            f"is {self.outputs[o].sets[k].name} vs {self.outputs[o].sets[j].name}"
+                        )
             cells = self._cells_of(rule.antecedent)
             self._cell_rule[cells] = np.where(self._cell_rule[cells] < 0, index, self._cell_rule[cells])
+            decides = False
             for o, k in enumerate(rule.consequent):
                 if k is None:
                     continue
-                clash = cells[(self._table[o, cells] >= 0) & (self._table[o, cells] != k)]
-                if clash.size:
-                    other = self.rules[owner[o, clash[0]]]
-                    raise RuleBaseError(
-                        f"{rule.where}: conflicts with {other.where} on {self.outputs[o].name} "
-                        f"({self.outputs[o].sets[k].name} vs "
-                        f"{self.outputs[o].sets[self._table[o, clash[0]]].name}) at {self.describe_cell(int(clash[0]))}"
-                    )
                 fresh = cells[self._table[o, cells] < 0]
                 self._table[o, fresh] = k
                 owner[o, fresh] = index
+                decides = decides or fresh.size > 0
+            if not decides and earlier == index:
+                shadows = sorted({int(owner[o, c]) for o in range(len(self.outputs)) for c in cells if owner[o, c] >= 0})
+                raise RuleBaseError(
+                    f"{rule.where}: never applies: every combination it covers is decided by earlier rules "
+                    f"({', '.join(self.rules[i].where.rsplit(' ', 1)[-1] for i in shadows[:8])})"
+                )
         for o, output in enumerate(self.outputs):
             missing = np.flatnonzero(self._table[o] < 0)
             if missing.size:
@@ -113,7 +126,7 @@ class RuleBase:
         points = [np.array([s.points for s in v.sets]) for v in self.outputs]
         # Paper defuzzifier terms per output set: bottom + core, slopes, peak (pure-Python path).
         self._area_terms = [
-            [(d - a + c - b, (b - a) + (d - c), (b + c) / 2.0) for a, b, c, d in p] for p in points
+            [(float(d - a + c - b), float((b - a) + (d - c)), float((b + c) / 2.0)) for a, b, c, d in p] for p in points
         ]
 
     # ----- structure -------------------------------------------------------------------------

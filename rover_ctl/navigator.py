@@ -1,0 +1,113 @@
+"""The fuzzy navigator: pose, path target and ranges -> fuzzy inputs -> left/right wheel rpm.
+
+Pure: no clock, no I/O. Each ``step`` maps the geometry onto the rule base's inputs by name:
+
+- ``target_distance``: metres from the pose to the target.
+- ``target_direction``: degrees in ``[0, 360)``, the paper's "robot heading minus bearing to the
+  target" measured clockwise (compass sense); in ENU (counter-clockwise) terms that is
+  ``bearing - heading``, so 90 means the target lies 90 degrees to the LEFT, 270 to the right.
+- ``obstacle_<side>``: the latest range of the rangefinder with that MAV_SENSOR_ORIENTATION
+  (``front`` 0, ``front_right`` 1, ``right`` 2, ``back`` 4, ``left`` 6, ``front_left`` 7); ``inf``
+  means nothing in range. Inputs in metres (unit ``m``) get metres; any other unit (the paper's
+  0..20 range units) gets ``range_m * paper_range_units_per_m``.
+
+**A rangefinder the rule base reads but the caller does not pass (or passes as NaN) is taken as
+``NavigatorParams.missing_range_m`` (0 by default): that side counts as blocked.** The daemon's
+rangefinder failsafe relies on this; a rule base that has no input for a side ignores it.
+
+The outputs ``left_motor`` and ``right_motor`` are scaled so that the rule base's largest output
+peak becomes ``max_wheel_rpm``; with a speed limit both wheels are scaled down together
+(keeping the turn radius) so that neither exceeds the wheel rpm of that ground speed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from rover_ctl.config import NavigatorParams, RobotParams
+from rover_ctl.fuzzy import RuleBase, RuleBaseError, load_rulebase
+
+SIDES = {"front": 0, "front_right": 1, "right": 2, "back": 4, "left": 6, "front_left": 7}
+"""Obstacle input suffix -> MAV_SENSOR_ORIENTATION of the rangefinder that feeds it."""
+OUTPUTS = ("left_motor", "right_motor")
+
+
+@dataclass(frozen=True)
+class NavOutput:
+    """One navigator step: wheel setpoints and what the rule base saw."""
+
+    left_rpm: float
+    right_rpm: float
+    inputs: dict[str, float] = field(default_factory=dict)
+    """The rule base's inputs by name, plus ``target_distance_m`` and ``target_direction_rad``
+    (bearing minus heading in ENU, wrapped to (-pi, pi]: positive = target to the left)."""
+
+
+class Navigator:
+    """Steers towards a target among obstacles with a fuzzy rule base."""
+
+    def __init__(
+        self,
+        rulebase: RuleBase | str,
+        params: NavigatorParams,
+        max_wheel_rpm: float,
+        wheel_radius_m: float = RobotParams.wheel_radius_m,
+    ) -> None:
+        self.rulebase = load_rulebase(rulebase) if isinstance(rulebase, str) else rulebase
+        self.params = params
+        self.max_wheel_rpm = max_wheel_rpm
+        self.wheel_radius_m = wheel_radius_m
+        names = self.rulebase.input_names
+        missing = [n for n in ("target_distance", "target_direction") if n not in names]
+        missing += [n for n in OUTPUTS if n not in self.rulebase.output_names]
+        unknown = [n for n in names if n not in ("target_distance", "target_direction") and n.removeprefix("obstacle_") not in SIDES]
+        if missing or unknown:
+            raise RuleBaseError(
+                f"{self.rulebase.source}: not a navigation rule base "
+                f"(missing {', '.join(missing) or '-'}; unknown inputs {', '.join(unknown) or '-'}; "
+                f"inputs must be target_distance, target_direction, obstacle_<{'|'.join(SIDES)}>)"
+            )
+        self._obstacles = []  # (input name, orientation, metres -> input units)
+        for variable in self.rulebase.inputs:
+            if variable.name.startswith("obstacle_"):
+                scale = 1.0 if variable.unit == "m" else params.paper_range_units_per_m
+                self._obstacles.append((variable.name, SIDES[variable.name.removeprefix("obstacle_")], scale))
+        full_scale = max(abs(s.peak) for name in OUTPUTS for s in self.rulebase.outputs[self.rulebase.output_names.index(name)].sets)
+        self._rpm_per_output = max_wheel_rpm / full_scale
+
+    @property
+    def orientations(self) -> list[int]:
+        """Rangefinder orientations this rule base reads."""
+        return [orientation for _, orientation, _ in self._obstacles]
+
+    def step(
+        self,
+        pose_east_m: float,
+        pose_north_m: float,
+        heading_rad: float,
+        target_east_m: float,
+        target_north_m: float,
+        ranges_m: dict[int, float],
+        speed_limit_mps: float | None = None,
+    ) -> NavOutput:
+        d_east, d_north = target_east_m - pose_east_m, target_north_m - pose_north_m
+        distance_m = math.hypot(d_east, d_north)
+        relative_rad = math.remainder(math.atan2(d_north, d_east) - heading_rad, math.tau) if distance_m > 0.0 else 0.0
+        inputs = {"target_distance": distance_m, "target_direction": math.degrees(relative_rad) % 360.0}
+        for name, orientation, scale in self._obstacles:
+            range_m = ranges_m.get(orientation, math.nan)
+            if range_m is None or math.isnan(range_m):
+                range_m = self.params.missing_range_m
+            inputs[name] = range_m * scale
+        crisp = self.rulebase.evaluate_one(**inputs)
+        left = crisp["left_motor"] * self._rpm_per_output
+        right = crisp["right_motor"] * self._rpm_per_output
+        if speed_limit_mps is not None:
+            limit_rpm = max(speed_limit_mps, 0.0) / (math.tau * self.wheel_radius_m) * 60.0
+            fastest = max(abs(left), abs(right))
+            if fastest > limit_rpm:
+                left, right = left * limit_rpm / fastest, right * limit_rpm / fastest
+        inputs["target_distance_m"] = distance_m
+        inputs["target_direction_rad"] = relative_rad
+        return NavOutput(left, right, inputs)
