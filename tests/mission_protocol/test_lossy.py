@@ -1,0 +1,157 @@
+"""Uploads through a lossy UDP proxy: the stored mission is the complete upload or unchanged."""
+
+from __future__ import annotations
+
+import random
+import select
+import socket
+import threading
+import time
+from dataclasses import replace
+
+import pytest
+from mission_protocol.helpers import MAVPROXY, LinkThread, expect, gcs, sample_mission
+from pymavlink.dialects.v20 import ardupilotmega as mav
+from support import free_port
+
+from rover_ctl.config import GcsParams
+from rover_ctl.mission.client import MissionClient, MissionClientError
+from rover_ctl.mission.model import Mission, MissionType
+from rover_ctl.mission.service import item_message, wire_items
+
+LINK = GcsParams(mission_item_retry_s=0.05, mission_upload_timeout_s=1.0, heartbeat_period_s=0.2)
+CLIENT = GcsParams(client_retry_s=0.05, client_retries=40, client_connect_timeout_s=3.0)
+UPLOADS = 5
+
+
+class LossyProxy:
+    """Forwards UDP datagrams between a client and ``127.0.0.1:target_port``, misbehaving.
+
+    Each datagram, either way, is dropped with probability ``p_drop``, else sent twice with
+    ``p_dup``, else held back with ``p_hold`` and released after the next datagram in the same
+    direction (or after ``hold_s``): reordering. Seeded, so a failure can be replayed.
+    """
+
+    def __init__(self, target_port: int, seed: int, p_drop=0.2, p_dup=0.2, p_hold=0.2, hold_s=0.05) -> None:
+        self.port = free_port()
+        self.target = ("127.0.0.1", target_port)
+        self.rng = random.Random(seed)
+        self.p_drop, self.p_dup, self.p_hold, self.hold_s = p_drop, p_dup, p_hold, hold_s
+        self.stats = {"forwarded": 0, "dropped": 0, "duplicated": 0, "reordered": 0}
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="lossy-proxy", daemon=True)
+
+    def __enter__(self) -> "LossyProxy":
+        self._thread.start()
+        assert self._ready.wait(5.0)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+
+    def _run(self) -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as front, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as back:
+            front.bind(("127.0.0.1", self.port))
+            back.bind(("127.0.0.1", 0))
+            client = None
+            held: dict[int, tuple[bytes, float]] = {}
+            self._ready.set()
+            while not self._stop.is_set():
+                readable, _, _ = select.select([front, back], [], [], self.hold_s)
+                now = time.monotonic()
+                for sock in readable:
+                    data, addr = sock.recvfrom(65535)
+                    if sock is front:
+                        client = addr
+                        out, dest = back, self.target
+                    elif client is None:
+                        continue
+                    else:
+                        out, dest = front, client
+                    self._forward(out, dest, data, held, now)
+                for key, (data, since) in list(held.items()):
+                    if now - since >= self.hold_s:
+                        del held[key]
+                        (back if key == 0 else front).sendto(data, self.target if key == 0 else client)
+
+    def _forward(self, out, dest, data: bytes, held: dict, now: float) -> None:
+        key = 0 if dest == self.target else 1
+        roll = self.rng.random()
+        if roll < self.p_drop:
+            self.stats["dropped"] += 1
+            return
+        if roll < self.p_drop + self.p_hold and key not in held:
+            held[key] = (data, now)
+            self.stats["reordered"] += 1
+            return
+        out.sendto(data, dest)
+        self.stats["forwarded"] += 1
+        if self.rng.random() < self.p_dup:
+            out.sendto(data, dest)
+            self.stats["duplicated"] += 1
+        if key in held:  # release the held one after this newer datagram: reordered
+            out.sendto(held.pop(key)[0], dest)
+
+
+def settled(lt: LinkThread, timeout_s: float = 5.0) -> None:
+    """Wait until the link has no upload in progress (finished or timed out)."""
+    end = time.monotonic() + timeout_s
+    while lt.link.service.uploading:
+        assert time.monotonic() < end, "upload never settled"
+        time.sleep(0.01)
+
+
+def same_items(a: list, b: list) -> bool:
+    return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
+
+
+def variant(k: int) -> Mission:
+    base = sample_mission(3 + k)
+    return replace(base, items=[replace(i, z=float(k)) for i in base.items])
+
+
+def test_uploads_through_20pct_loss_dup_reorder_are_all_or_nothing(udp_port):
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=LINK) as lt, LossyProxy(udp_port, seed=1) as proxy:
+        previous = lt.link.service.mission
+        successes = 0
+        with MissionClient(f"udpout:127.0.0.1:{proxy.port}", CLIENT) as client:
+            client.connect()
+            for k in range(UPLOADS):
+                new = variant(k)
+                try:
+                    client.upload(new)
+                    ok = True
+                except MissionClientError:
+                    ok = False
+                settled(lt)
+                stored = lt.link.service.mission
+                if ok:
+                    successes += 1
+                    assert stored.same_as(new), f"upload {k} acknowledged but stored mission differs"
+                else:  # each part (mission, fence, rally) is its own atomic upload
+                    for kind in MissionType:
+                        part = stored.of_type(kind)
+                        assert same_items(part, new.of_type(kind)) or same_items(part, previous.of_type(kind))
+                previous = stored
+            assert client.download().same_as(stored)  # the download path through the same proxy
+    print(f"{successes}/{UPLOADS} uploads acknowledged through the proxy: {proxy.stats}")
+    assert successes >= UPLOADS - 1, proxy.stats
+    assert min(proxy.stats["dropped"], proxy.stats["duplicated"], proxy.stats["reordered"]) > 10, proxy.stats
+
+
+def test_an_abandoned_upload_times_out_and_keeps_the_stored_mission(udp_port, mission):
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=LINK) as lt:
+        lt.link.service.mission = mission
+        conn = gcs(udp_port, MAVPROXY)
+        other = sample_mission(9)
+        wire = wire_items(other, MissionType.MISSION)
+        conn.mav.mission_count_send(1, 1, len(wire), 0)
+        for seq in range(3):
+            expect(conn, "MISSION_REQUEST_INT", seq=seq)
+            conn.mav.send(item_message(wire[seq], seq, 0, (1, 1)))
+        expect(conn, "MISSION_REQUEST_INT", seq=3)  # re-requested every retry period, then given up
+        ack = expect(conn, "MISSION_ACK", timeout_s=LINK.mission_upload_timeout_s + 2.0)
+        assert ack.type == mav.MAV_MISSION_OPERATION_CANCELLED
+        assert lt.link.service.mission is mission
