@@ -148,16 +148,12 @@ class Rangefinder:
             c, s = math.cos(yaw_enu_rad), math.sin(yaw_enu_rad)
             origin = (east_m + c * mount.forward_m - s * mount.left_m, north_m + s * mount.forward_m + c * mount.left_m)
             beam = yaw_enu_rad + mount.bearing_rad
-            nearest = None
-            for offset in self.ray_offsets_rad:
-                hit = world.ray_cast(origin, beam + offset, p.max_m, time_s)
-                if hit is not None and (nearest is None or hit[0] < nearest):
-                    nearest = hit[0]
+            hit = world.fan_cast(origin, [beam + offset for offset in self.ray_offsets_rad], p.max_m, time_s)
             noise = self.rng.normal(0.0, p.noise_std_m)
-            if nearest is None or nearest + noise > p.max_m:
+            if hit is None or hit[0] + noise > p.max_m:
                 self.last_range_m = None
             else:
-                self.last_range_m = max(p.min_m, nearest + noise)
+                self.last_range_m = max(p.min_m, hit[0] + noise)
         return RangeSample(time_s, mount.sensor_id, mount.orientation, p.min_m, p.max_m, self.last_range_m)
 
 

@@ -310,10 +310,9 @@ class LocalObstacle:
         dx, dy = self.offset(time_s)
         return affinity.translate(self._shape0, dx, dy)
 
-    def ray(self, ox: float, oy: float, dx: float, dy: float, max_m: float, time_s: float) -> float | None:
-        """Distance along the unit ray (ox, oy) + t (dx, dy), 0 <= t <= max_m, to the obstacle."""
-        cx, cy = self.ref_at(time_s)
-        px, py = ox - cx, oy - cy  # ray origin relative to the reference point
+    def ray(self, px: float, py: float, dx: float, dy: float, max_m: float) -> float | None:
+        """Distance along the unit ray (px, py) + t (dx, dy), 0 <= t <= max_m, to the obstacle, with
+        the origin (px, py) given relative to the obstacle's current reference point."""
         along = -(px * dx + py * dy)
         miss2 = px * px + py * py - along * along
         r2 = self.radius_m * self.radius_m
@@ -369,23 +368,46 @@ class LocalWorld:
 
     def __init__(self, obstacles: list[LocalObstacle]) -> None:
         self.obstacles = obstacles
+        self._refs_time_s: float | None = None
+        self._refs: list[tuple[float, float]] = []
 
     def ray_cast(self, origin_en: tuple[float, float], bearing_rad: float, max_m: float,
                  time_s: float) -> tuple[float, str] | None:
         """Nearest (distance_m, obstacle id) along a ray at ENU bearing (0 east, CCW) within max_m."""
-        dx, dy = math.cos(bearing_rad), math.sin(bearing_rad)
+        return self.fan_cast(origin_en, (bearing_rad,), max_m, time_s)
+
+    def fan_cast(self, origin_en: tuple[float, float], bearings_rad, max_m: float,
+                 time_s: float) -> tuple[float, str] | None:
+        """Nearest (distance_m, obstacle id) over several rays from one origin within max_m.
+
+        Obstacles whose bounding circle is out of reach are dropped once for the whole fan."""
+        ox, oy = origin_en
+        candidates = []
+        for obstacle, (cx, cy) in zip(self.obstacles, self.refs_at(time_s)):
+            px, py = ox - cx, oy - cy
+            reach = max_m + obstacle.radius_m
+            if px * px + py * py <= reach * reach:
+                candidates.append((obstacle, px, py))
         best = None
-        for obstacle in self.obstacles:
-            t = obstacle.ray(origin_en[0], origin_en[1], dx, dy, max_m, time_s)
-            if t is not None and (best is None or t < best[0]):
-                best = (t, obstacle.id)
+        for bearing in bearings_rad if candidates else ():
+            dx, dy = math.cos(bearing), math.sin(bearing)
+            for obstacle, px, py in candidates:
+                t = obstacle.ray(px, py, dx, dy, max_m)
+                if t is not None and (best is None or t < best[0]):
+                    best = (t, obstacle.id)
         return best
+
+    def refs_at(self, time_s: float) -> list[tuple[float, float]]:
+        """Every obstacle's reference point at ``time_s`` (kept for repeated queries at one time)."""
+        if time_s != self._refs_time_s:
+            self._refs = [o.ref_at(time_s) for o in self.obstacles]
+            self._refs_time_s = time_s
+        return self._refs
 
     def near(self, center_en: tuple[float, float], radius_m: float, time_s: float) -> list[LocalObstacle]:
         """Obstacles whose bounding circle comes within ``radius_m`` of ``center_en``."""
         found = []
-        for obstacle in self.obstacles:
-            cx, cy = obstacle.ref_at(time_s)
+        for obstacle, (cx, cy) in zip(self.obstacles, self.refs_at(time_s)):
             if math.hypot(cx - center_en[0], cy - center_en[1]) <= radius_m + obstacle.radius_m:
                 found.append(obstacle)
         return found
