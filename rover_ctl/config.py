@@ -153,8 +153,13 @@ class EstimatorParams:
     """How fast the gyro bias may wander, (rad/s)/sqrt(s)."""
     gyro_bias_sigma0_radps: float = 0.02
     """Gyro bias uncertainty at start (a consumer MEMS gyro is within about 1 deg/s)."""
-    compass_sigma_rad: float = 0.05
-    """Compass heading noise, 1-sigma (about 3 deg: soft-iron and motor interference)."""
+    compass_sigma_rad: float = 0.035
+    """Compass heading white noise, 1-sigma (about 2 deg)."""
+    compass_offset_sigma0_rad: float = 0.07
+    """Compass offset (calibration residue, declination error) uncertainty at start, about 4 deg;
+    the GPS course estimates it once the rover moves."""
+    compass_offset_walk_rad_per_sqrt_s: float = 0.0005
+    """How fast the compass offset may wander (motor currents, nearby iron), rad/sqrt(s)."""
     speed_accel_per_sqrt_s: float = 0.5
     """Random walk of the speed state between wheel readings, (m/s)/sqrt(s)."""
     wheel_speed_sigma_mps: float = 0.03
@@ -169,6 +174,11 @@ class EstimatorParams:
     """Floor on a fix's 1-sigma: eph below this is not believed."""
     gps_default_sigma_m: float = 5.0
     """1-sigma used when a fix reports no eph (UINT16_MAX)."""
+    gps_velocity_sigma_mps: float = 0.1
+    """Per-axis 1-sigma of the GPS velocity (u-blox M8 class: 0.05-0.1 m/s); sets the course's
+    sigma as atan(sigma / speed)."""
+    gps_course_min_speed_mps: float = 0.5
+    """Slower than this the GPS course says little and is not fused."""
     gate_sigma: float = 5.0
     """Innovation gate: a fix whose Mahalanobis distance exceeds this is rejected (EKF3's
     EK3_POS_I_GATE is 5 sigma too)."""
