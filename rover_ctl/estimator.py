@@ -4,25 +4,32 @@ No I/O: the filter takes typed readings (``rover_ctl.readings``) stamped with ve
 returns a ``Pose`` in the local ENU frame (``rover_ctl.geo.LocalFrame``). docs/estimator.md has
 the derivation, the tuning and the measured figures.
 
-State ``x = [e, n, psi, v, b]``: east and north (m), ENU heading (rad, 0 east, CCW), speed
-along the heading (m/s, negative when reversing) and the gyro bias (rad/s, ENU sense).
+State ``x = [e, n, psi, v, b, c]``: east and north (m), ENU heading (rad, 0 east, CCW), speed
+along the heading (m/s, negative when reversing), the gyro bias (rad/s, ENU sense) and the
+compass offset (rad: what the compass reads minus the true heading, a calibration residue of a
+few degrees that only the GPS course can reveal).
 
 Motion model over ``dt`` with the latest gyro rate ``g`` (ENU) and ``w = g - b``, integrated at
 the mid-point heading ``m = psi + w dt / 2``::
 
     e'   = e + v dt cos m          psi' = psi + w dt
-    n'   = n + v dt sin m          v'   = v,   b' = b
+    n'   = n + v dt sin m          v'   = v,   b' = b,   c' = c
 
 When no ATTITUDE came for ``attitude_timeout_s`` the turn rate is taken from the wheels instead,
 ``w = (d_right - d_left) / track / dt``: a skid-steer rover slips sideways in turns, so this
 over-estimates the rate and is only a fallback. The process noise is
-``Q = diag(s_lat^2, s_lat^2, s_gyro^2, s_acc^2, s_bias^2) * dt`` (random
-walks: sideways skid, gyro angle noise, speed change, bias wander). Measurements, all linear:
+``Q = diag(s_lat^2, s_lat^2, s_gyro^2, s_acc^2, s_bias^2, s_comp^2) * dt`` (random walks:
+sideways skid, gyro angle noise, speed change, gyro bias and compass offset wander).
+Measurements, all linear:
 
 * wheels: ``z = (d_left + d_right) / 2 / dt`` of two successive cumulative WHEEL_DISTANCE
   readings measures ``v``, with ``sigma = floor + slip * |z|``;
-* compass (ATTITUDE yaw, NED -> ENU): measures ``psi``; the residual is wrapped to [-pi, pi);
-* GPS: ``(e, n)`` of the fix measures the position with ``sigma = max(eph, floor)``.
+* compass (ATTITUDE yaw, NED -> ENU): measures ``psi + c``; the residual is wrapped to
+  [-pi, pi);
+* GPS: ``(e, n)`` of the fix measures the position with ``sigma = max(eph, floor)``;
+* GPS course over ground, while moving faster than ``gps_course_min_speed_mps``: measures
+  ``psi`` (``psi + pi`` when reversing; a skid-steer rover does not crab) with
+  ``sigma = atan(sigma_vel / speed)``. This is what makes the compass offset observable.
 
 Why an EKF and not a UKF: the only nonlinearity is the heading in the position update, which is
 mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF with the exact
@@ -57,8 +64,8 @@ from rover_ctl.config import EstimatorParams
 from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
 from rover_ctl.readings import Attitude, GpsFix, WheelDistance
 
-E, N, PSI, V, BIAS = range(5)
-_DIM = 5
+E, N, PSI, V, BIAS, COMPASS = range(6)
+_DIM = 6
 
 
 class GpsVerdict(enum.Enum):
@@ -128,17 +135,18 @@ def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndar
     return out, jac
 
 
-def _selector(*rows: int):
-    """Linear measurement of some state components: the H matrix and h(x)."""
+def _linear(*rows: tuple[int, ...]):
+    """A linear measurement, each row the sum of some state components: H and h(x) = H x."""
     h = np.zeros((len(rows), _DIM))
-    for i, row in enumerate(rows):
-        h[i, row] = 1.0
+    for i, components in enumerate(rows):
+        h[i, list(components)] = 1.0
     return (lambda x: h), (lambda x: h @ x)
 
 
-_H_POS, _HX_POS = _selector(E, N)
-_H_PSI, _HX_PSI = _selector(PSI)
-_H_V, _HX_V = _selector(V)
+_H_POS, _HX_POS = _linear((E,), (N,))
+_H_PSI, _HX_PSI = _linear((PSI,))
+_H_COMPASS, _HX_COMPASS = _linear((PSI, COMPASS))
+_H_V, _HX_V = _linear((V,))
 
 
 def _angle_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
@@ -241,7 +249,9 @@ class PoseEstimator:
         lag_s = self._time_s - r.time_s
         z = wrap_pi(heading_rad + (self._gyro_radps - float(self._kf.x[BIAS, 0])) * lag_s)
         sigma = self.params.compass_sigma_rad
-        self._kf.update(np.array([[z]]), _H_PSI, _HX_PSI, R=np.array([[sigma * sigma]]), residual=_angle_residual)
+        self._kf.update(
+            np.array([[z]]), _H_COMPASS, _HX_COMPASS, R=np.array([[sigma * sigma]]), residual=_angle_residual
+        )
         self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
 
     def on_gps(self, r: GpsFix) -> GpsVerdict:
@@ -269,6 +279,7 @@ class PoseEstimator:
         distance2 = float((innovation.T @ np.linalg.solve(s_cov, innovation))[0, 0])
         if distance2 <= self.params.gate_sigma**2:
             self._kf.update(z, _H_POS, _HX_POS, R=r_cov)
+            self._fuse_course(r, lag_s)
             self._rejected_since_s = None
             self._gps_fused_s = self._time_s
             return GpsVerdict.ACCEPTED
@@ -280,6 +291,20 @@ class PoseEstimator:
         return GpsVerdict.RESET
 
     # -------------------------------------------------------------------------------- internals
+    def _fuse_course(self, r: GpsFix, lag_s: float) -> None:
+        """GPS course over ground as a heading measurement, when moving fast enough to mean it."""
+        p = self.params
+        if not (math.isfinite(r.course_deg) and math.isfinite(r.speed_mps)) or r.speed_mps < p.gps_course_min_speed_mps:
+            return
+        x = self._kf.x[:, 0]
+        track_rad = compass_to_enu_rad(math.radians(r.course_deg))
+        if x[V] < 0.0:
+            track_rad += math.pi  # reversing: the rover points against its track
+        z = wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - x[BIAS]) * lag_s)
+        sigma = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps)
+        self._kf.update(np.array([[z]]), _H_PSI, _HX_PSI, R=np.array([[sigma * sigma]]), residual=_angle_residual)
+        self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
+
     def _advance(self, time_s: float) -> bool:
         """Predict forward to ``time_s`` if it is newer; False if it is too old to use."""
         if not self._initialised:
@@ -295,6 +320,7 @@ class PoseEstimator:
                 p.gyro_noise_rad_per_sqrt_s**2,
                 p.speed_accel_per_sqrt_s**2,
                 p.gyro_bias_walk_radps_per_sqrt_s**2,
+                p.compass_offset_walk_rad_per_sqrt_s**2,
             ]
         ) * dt_s
         self._kf.predict(u=(dt_s, self._rate_input_radps(time_s)))
@@ -313,11 +339,22 @@ class PoseEstimator:
             return
         east_m, north_m, sigma_m = self._pending_fix
         p = self.params
-        self._kf.x = np.array([[east_m], [north_m], [self._pending_heading], [0.0], [0.0]])
-        # Speed unknown until the next wheel reading: any plausible speed.
+        self._kf.x = np.array([[east_m], [north_m], [self._pending_heading], [0.0], [0.0], [0.0]])
+        # Speed unknown until the next wheel reading: any plausible speed. The heading is the
+        # compass reading, so its error is the unknown offset (plus noise) and the offset's
+        # error is minus that offset: correlated -1.
+        offset_var = p.compass_offset_sigma0_rad**2
         self._kf.P = np.diag(
-            [sigma_m**2, sigma_m**2, p.compass_sigma_rad**2, p.wheel_max_speed_mps**2, p.gyro_bias_sigma0_radps**2]
+            [
+                sigma_m**2,
+                sigma_m**2,
+                p.compass_sigma_rad**2 + offset_var,
+                p.wheel_max_speed_mps**2,
+                p.gyro_bias_sigma0_radps**2,
+                offset_var,
+            ]
         )
+        self._kf.P[PSI, COMPASS] = self._kf.P[COMPASS, PSI] = -offset_var
         self._initialised = True
 
     def _reset_position(self, z: np.ndarray, r_cov: np.ndarray) -> None:

@@ -27,7 +27,11 @@ class Sensors:
     gps_bias_tau_s: float = 120.0
     gps_eph_m: float | None = None
     """eph the receiver reports (default: gps_white_m)."""
-    compass_sigma_rad: float = 0.05
+    compass_sigma_rad: float = 0.035
+    compass_offset_rad: float | None = None
+    """Constant compass offset; None: drawn from N(0, compass_offset_sigma_rad)."""
+    compass_offset_sigma_rad: float = 0.07
+    gps_velocity_sigma_mps: float = 0.1
     gyro_noise_rad_per_sqrt_s: float = 0.003
     gyro_bias_radps: float = 0.01
     wheel_speed_sigma_mps: float = 0.03
@@ -78,6 +82,7 @@ def simulate(
     bias[0] = rng.normal(0.0, s.gps_bias_m, 2)
     decay = math.exp(-dt / s.gps_bias_tau_s)
     left = right = 0.0
+    offset = s.compass_offset_rad if s.compass_offset_rad is not None else rng.normal(0.0, s.compass_offset_sigma_rad)
     readings: list = []
     for k in range(steps):
         t = t_all[k]
@@ -102,10 +107,13 @@ def simulate(
                 if a <= t < b:
                     e, n = e + ge, n + gn
             lat, lon = CMAC.to_geodetic(e, n)
+            v = speed_mps(t)
+            vel = v * np.array([math.cos(heading[k]), math.sin(heading[k])]) + rng.normal(0.0, s.gps_velocity_sigma_mps, 2)
+            course_deg = math.degrees(enu_to_compass_rad(math.atan2(vel[1], vel[0])))
             readings.append(
-                GpsFix(t, lat, lon, 584.0, 3, s.gps_eph_m or s.gps_white_m, speed_mps(t), math.nan, 12)
+                GpsFix(t, lat, lon, 584.0, 3, s.gps_eph_m or s.gps_white_m, float(np.hypot(*vel)), course_deg, 12)
             )
-        compass = enu_to_compass_rad(heading[k] + rng.normal(0.0, s.compass_sigma_rad))
+        compass = enu_to_compass_rad(heading[k] + offset + rng.normal(0.0, s.compass_sigma_rad))
         readings.append(Attitude(t, compass, -gyro))
         readings.append(WheelDistance(t, left, right))
     return Run(readings, t_all, east, north, heading, bias)

@@ -277,3 +277,15 @@ def test_wheels_steer_when_the_gyro_is_silent():
 def test_bad_track_is_refused():
     with pytest.raises(ValueError, match="track_m"):
         PoseEstimator(CMAC, EstimatorParams(), 0.0)
+
+
+def test_compass_offset_is_learnt_from_the_gps_course():
+    offset = math.radians(5.0)
+    run = simulate(60.0, lambda t: 1.5, lambda t: 0.05, seed=13, sensors=Sensors(compass_offset_rad=offset))
+    estimator, rec, _ = run_filter(run)
+    assert math.degrees(rec.heading_rms_rad(since_s=20.0)) < 1.0
+    assert estimator.pose().heading_sigma_rad < math.radians(1.0)
+    # without the course the offset stays in the heading (the position fixes alone see it slowly)
+    run.readings = [dataclasses.replace(r, course_deg=math.nan) if isinstance(r, GpsFix) else r for r in run.readings]
+    _, blind, _ = run_filter(run)
+    assert math.degrees(blind.heading_rms_rad(since_s=5.0)) > 2.0
