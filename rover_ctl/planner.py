@@ -12,11 +12,12 @@ circles reported by the daemon -- is inflated by the clearance
 
 and inclusion fences are shrunk by ``c``. The remaining free space F is a polygon with holes; a
 shortest path in it is a polyline that bends only at reflex vertices of F, so the graph's nodes are
-those vertices and its edges the vertex pairs whose straight segment stays in F (one vectorised
-shapely ``covers`` call). A visibility graph gives exact shortest paths with few nodes in the
-open, sparse fields a rover mission crosses; a grid A* would need a fine grid over a ~100 m
-field for the same accuracy and still produce staircase paths. The static graph is built once
-and rebuilt only when temporary obstacles change; a query adds the start and goal.
+those vertices and its edges the vertex pairs whose straight segment is tangent to the zones at
+both ends (the reduced visibility graph) and stays in F (one vectorised shapely ``covers`` call).
+A visibility graph gives exact shortest paths with few nodes in the open, sparse fields a rover
+mission crosses; a grid A* would need a fine grid over a ~100 m field for the same accuracy and
+still produce staircase paths. The static graph is built once and rebuilt only when temporary
+obstacles change; a query adds the start and goal.
 
 Circles become regular ``PlannerParams.circle_segments``-gons that circumscribe the inflated
 circle, and polygon corners are rounded with the chord error compensated, so the polygonal
@@ -213,20 +214,35 @@ def _polygons(geometry) -> list[Polygon]:
     return [g for g in getattr(geometry, "geoms", []) if isinstance(g, Polygon) and not g.is_empty]
 
 
-def _reflex_vertices(free: Polygon | MultiPolygon) -> list[EN]:
-    """Vertices where the free space turns reflex (interior angle > 180 deg): the only places a
-    shortest path bends. With every ring oriented so the free space is on its left, those are
-    the right turns."""
-    nodes = []
+def _reflex_vertices(free: Polygon | MultiPolygon) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices where the free space turns reflex (interior angle > 180 deg), the only places a
+    shortest path bends, with their ring neighbours (previous, next). With every ring oriented so
+    the free space is on its left, those are the right turns."""
+    found = []
     for poly in _polygons(free):
         poly = orient(poly, 1.0)
         for ring in [poly.exterior, *poly.interiors]:
             pts = np.asarray(ring.coords)[:-1]
             prev, nxt = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)
             u, v = pts - prev, nxt - pts
-            cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-            nodes.extend(tuple(map(float, p)) for p in pts[cross < 0])
-    return nodes
+            reflex = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] < 0
+            found.append(np.stack([pts[reflex], prev[reflex], nxt[reflex]]))
+    if not found:
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2))
+    pts, prev, nxt = np.concatenate(found, axis=1)
+    return pts, prev, nxt
+
+
+def _tangent(at: np.ndarray, prev: np.ndarray, nxt: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Whether the line from each vertex ``at`` towards ``other`` leaves both ring neighbours on
+    one side. A shortest path only wraps around a vertex along such a line (it would otherwise
+    cut the corner), so other edges are dropped before the costlier visibility test: the
+    reduced visibility graph."""
+    d = other - at
+    a, b = prev - at, nxt - at
+    side_prev = d[:, 0] * a[:, 1] - d[:, 1] * a[:, 0]
+    side_next = d[:, 0] * b[:, 1] - d[:, 1] * b[:, 0]
+    return side_prev * side_next >= 0
 
 
 class Planner:
@@ -283,16 +299,17 @@ class Planner:
         self._free = region.difference(zones)
         self._node_free = node_region.difference(node_zones)
         shapely.prepare(self._free)
-        nodes = _reflex_vertices(self._node_free)
+        pts, self._prev, self._next = _reflex_vertices(self._node_free)
+        self._pts = pts
+        self._nodes = [(float(e), float(n)) for e, n in pts]
         self._graph = nx.Graph()
-        self._graph.add_nodes_from(range(len(nodes)))
-        self._nodes = nodes
-        if len(nodes) > 1:
-            i, j = np.triu_indices(len(nodes), k=1)
-            pts = np.asarray(nodes)
-            visible = self._visible(pts[i], pts[j])
-            for a, b in zip(i[visible], j[visible]):
-                self._graph.add_edge(int(a), int(b), weight=math.dist(nodes[a], nodes[b]))
+        self._graph.add_nodes_from(range(len(pts)))
+        i, j = np.triu_indices(len(pts), k=1)
+        useful = _tangent(pts[i], self._prev[i], self._next[i], pts[j]) & _tangent(pts[j], self._prev[j], self._next[j], pts[i])
+        i, j = i[useful], j[useful]
+        visible = self._visible(pts[i], pts[j])
+        for a, b in zip(i[visible], j[visible]):
+            self._graph.add_edge(int(a), int(b), weight=math.dist(self._nodes[a], self._nodes[b]))
 
     def _visible(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         lines = shapely.linestrings(np.stack([a, b], axis=1))
@@ -353,15 +370,15 @@ class Planner:
         return Path(tuple(points))
 
     def _search(self, start: EN, goal: EN) -> list[EN] | None:
-        graph, nodes = self._graph, self._nodes
+        graph, nodes, pts = self._graph, self._nodes, self._pts
         if not nodes:
             return None
-        pts = np.asarray(nodes)
         graph.add_nodes_from(["start", "goal"])
         try:
             for name, end in (("start", start), ("goal", goal)):
                 here = np.repeat(np.array([end]), len(nodes), axis=0)
-                for k in np.flatnonzero(self._visible(here, pts)):
+                candidates = np.flatnonzero(_tangent(pts, self._prev, self._next, here))
+                for k in candidates[self._visible(here[candidates], pts[candidates])]:
                     graph.add_edge(name, int(k), weight=math.dist(end, nodes[k]))
             try:
                 route = nx.astar_path(

@@ -186,3 +186,33 @@ def test_bad_fence_items_are_refused_with_the_item_named(items, message):
     with pytest.raises(FenceError, match=message) as err:
         Fence.from_items(items, lambda lat, lon: (lon, lat))
     assert str(err.value).startswith("fence item 0")
+
+
+def test_reduced_visibility_graph_is_as_short_as_the_full_one():
+    """Oracle: Dijkstra over every visible vertex pair (no tangency pruning) on random fields."""
+    import networkx as nx
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    box = ((-10, -25), (60, -25), (60, 25), (-10, 25))
+    for _ in range(3):
+        circles = tuple(Circle(tuple(rng.uniform((5, -20), (45, 20))), float(rng.uniform(0.5, 3))) for _ in range(8))
+        triangles = [tuple(map(tuple, rng.uniform((5, -20), (45, 20)) + rng.uniform(0, 6, (3, 2)))) for _ in range(4)]
+        planner = Planner(PARAMS, ROBOT, Fence(inclusion_polygons=(box,), exclusion_circles=circles), polygons=triangles)
+        pts = planner._pts
+        i, j = np.triu_indices(len(pts), k=1)
+        full = nx.Graph()
+        visible = planner._visible(pts[i], pts[j])
+        full.add_weighted_edges_from((int(a), int(b), math.dist(pts[a], pts[b])) for a, b in zip(i[visible], j[visible]))
+        for _ in range(3):
+            start, goal = tuple(rng.uniform((-8, -20), (-2, 20))), tuple(rng.uniform((50, -20), (58, 20)))
+            path = planner.plan_leg(start, goal)
+            if not path.ok:
+                continue
+            for name, end in (("s", start), ("g", goal)):
+                seen = np.flatnonzero(planner._visible(np.repeat([end], len(pts), axis=0), pts))
+                full.add_weighted_edges_from((name, int(k), math.dist(end, pts[k])) for k in seen)
+            if planner._visible(np.array([start]), np.array([goal]))[0]:
+                full.add_edge("s", "g", weight=math.dist(start, goal))
+            assert path.length_m == pytest.approx(nx.shortest_path_length(full, "s", "g", weight="weight"), rel=1e-4)
+            full.remove_nodes_from(["s", "g"])
