@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -59,6 +60,8 @@ class LockstepClient:
         """Sim time of the last frame answered."""
         self._answered_ns = -1
         self._inbox: list = []
+        self._parsed: deque = deque()
+        """Messages read but not yet sorted into frames (one read can span several frames)."""
         self._pending: tuple[int, list] | None = None
         self._next_heartbeat_s = 0.0
         self.heartbeat()  # a udp client must speak first to be heard
@@ -79,14 +82,16 @@ class LockstepClient:
             return frame
         deadline = time.monotonic() + self.timeout_s
         while True:
-            for msg in self._read(min(0.5, max(0.0, deadline - time.monotonic()))):
+            while self._parsed:
+                msg = self._parsed.popleft()
                 if msg.get_type() == "TIMESYNC" and msg.tc1 == 0:
                     if msg.ts1 > self._answered_ns:
                         frame, self._inbox = self._inbox, []
                         return msg.ts1, frame
                 elif msg.get_type() != "BAD_DATA":
                     self._inbox.append(msg)
-            if time.monotonic() > deadline:
+            self._parsed.extend(self._read(min(0.5, max(0.0, deadline - time.monotonic()))))
+            if not self._parsed and time.monotonic() > deadline:
                 raise LockstepError(f"no lockstep marker within {self.timeout_s:g} s on {self.conn.address}")
 
     def answer(self, t_ns: int) -> None:
@@ -104,14 +109,20 @@ class LockstepClient:
 
     def command(self, command: int, *params: float) -> int:
         """Send a COMMAND_LONG and step frames until its COMMAND_ACK; return the MAV_RESULT."""
+        carried: list = []  # messages of the frames stepped here, handed to the caller's next frame
+        if self._pending is not None:
+            t_ns, carried = self._pending
+            self._pending = None
+            self.answer(t_ns)
         values = list(params) + [0.0] * (7 - len(params))
         self.conn.mav.command_long_send(1, 1, command, 0, *values)
         deadline = time.monotonic() + self.timeout_s
         while time.monotonic() < deadline:
             t_ns, msgs = self.next_frame()
+            carried += msgs
             acks = [m.result for m in msgs if m.get_type() == "COMMAND_ACK" and m.command == command]
             if acks:
-                self._pending = (t_ns, msgs)  # the frame stays unanswered for the caller's loop
+                self._pending = (t_ns, carried)  # the frame stays unanswered for the caller's loop
                 return acks[0]
             self.answer(t_ns)
         raise LockstepError(f"no COMMAND_ACK for command {command} within {self.timeout_s:g} s")

@@ -36,6 +36,8 @@ STEERING_CHANNEL = 0
 THROTTLE_CHANNEL = 2
 """Zero-based RC channel indexes: ch1 steering, ch3 throttle (ArduPilot Rover defaults)."""
 STATUSTEXT_MAX_CHARS = 50
+PARAM_ID_CHARS = 16
+"""MAVLink param_id length: longer names (SIM_LINK_LOSS_PCT) travel cut to 16 characters."""
 
 # Streams of ArduPilot's REQUEST_DATA_STREAM (GCS_MAVLINK stream groups, restricted to what we send).
 DATA_STREAMS = {
@@ -133,10 +135,14 @@ class MavlinkVehicle:
             return True
         return False
 
+    def wire_name(self, param_id: str) -> str:
+        """The parameter a MAVLink param_id means (ids are cut to 16 characters on the wire)."""
+        return next((n for n in self.param_names() if n[:PARAM_ID_CHARS] == param_id[:PARAM_ID_CHARS]), param_id)
+
     def _param_value(self, name: str):
         names = self.param_names()
         return mavlink.MAVLink_param_value_message(
-            name.encode(), self.get_param(name), mavlink.MAV_PARAM_TYPE_REAL32, len(names), names.index(name))
+            name[:PARAM_ID_CHARS].encode(), self.get_param(name), mavlink.MAV_PARAM_TYPE_REAL32, len(names), names.index(name))
 
     # ---- incoming ---------------------------------------------------------------------
     def handle(self, msg, t_s: float) -> list:
@@ -155,15 +161,17 @@ class MavlinkVehicle:
             return [self._param_value(name) for name in self.param_names()]
         elif kind == "PARAM_REQUEST_READ":
             names = self.param_names()
-            name = msg.param_id if msg.param_index < 0 else (names[msg.param_index] if msg.param_index < len(names) else "")
+            name = self.wire_name(msg.param_id) if msg.param_index < 0 else \
+                (names[msg.param_index] if msg.param_index < len(names) else "")
             return [self._param_value(name)] if name in names else []
         elif kind == "PARAM_SET":
+            name = self.wire_name(msg.param_id)
             try:
-                known = self.set_param(msg.param_id, msg.param_value)
+                known = self.set_param(name, msg.param_value)
             except FaultError as exc:
                 self.say(mavlink.MAV_SEVERITY_WARNING, str(exc))
                 known = True
-            return [self._param_value(msg.param_id)] if known else []
+            return [self._param_value(name)] if known else []
         elif kind == "TIMESYNC" and msg.tc1 == 0:
             # a request: answer with our clock (sim time), never 0, which would read as a request
             return [mavlink.MAVLink_timesync_message(max(1, round(t_s * 1e9)), msg.ts1)]

@@ -21,6 +21,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from support import free_port
 
@@ -103,3 +104,30 @@ def rover_sitl(*flags: str, endpoints: list[str] | None = None, start_timeout_s:
         sitl.returncode = proc.returncode
         sitl.stderr = proc.stderr.read()
         proc.stderr.close()
+
+
+def lockstep_client(url: str, **kwargs):
+    """A bench.lockstep_client.LockstepClient (the repository root may not be on sys.path under xdist)."""
+    root = str(Path(__file__).resolve().parents[2])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    from bench.lockstep_client import LockstepClient
+
+    return LockstepClient(url, **kwargs)
+
+
+def collect(client, seconds_sim: float, command=None) -> list[tuple[float, object]]:
+    """Run ``client`` for ``seconds_sim``; ``command(t_s)`` -> (throttle_us, steering_us) or None.
+    Returns every message received as (frame time, message)."""
+    received: list[tuple[float, object]] = []
+
+    def on_frame(t_s: float, msgs: list):
+        received.extend((t_s, m) for m in msgs)
+        return command(t_s) if command is not None else None
+
+    client.run(seconds_sim, on_frame)
+    return received
+
+
+def of_type(received: list[tuple[float, object]], kind: str) -> list:
+    return [m for _, m in received if m.get_type() == kind]
