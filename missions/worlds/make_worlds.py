@@ -68,11 +68,14 @@ def cmac_loop() -> World:
 
 
 def boulder_fence() -> World:
-    """A few static obstacles in the SparkFun AVC lot, off the direct lines of the mission."""
+    """Static obstacles inside the geofence of missions/boulder_fence.plan (legs home -> (10, 25)
+    -> (60, 25) -> (60, -10), exclusion zone 31..39 x 20..30): one on each leg with a gap of at
+    least 2 m beside it, and a parked car away from the legs."""
     b = Builder(BOULDER)
-    b.circle("hay_bale", (12.0, 22.0), 0.7)
-    b.polygon("barrier", box((-10.0, 40.0), 4.0, 0.5, 0.0))
-    b.circle("post", (25.0, 50.0), 0.3)
+    b.circle("hay_bale", (5.5, 12.0), 0.7)
+    b.polygon("barrier", box((50.0, 24.0), 2.0, 0.5, 90.0))
+    b.circle("post", (60.5, 8.0), 0.3)
+    b.polygon("car", box((25.0, -15.0), 4.5, 1.8, 0.0))
     return b.world()
 
 

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import pytest
-from shapely.geometry import LineString, Point
+from shapely.geometry import LineString, Point, Polygon
 
 from sitl.geodesy import LocalFrame
 from sitl.world import Home, LocalObstacle, LocalWorld, World, WorldError, load_world, parse_world, scatter_obstacles
@@ -176,3 +176,26 @@ def test_scatter_refuses_an_impossible_request():
 def test_world_without_obstacles_is_valid():
     assert parse_world(collection()) == World()
     assert World().local(FRAME).near((0, 0), 10.0, 0.0) == []
+
+
+def test_boulder_world_fits_the_bundled_plan():
+    """Obstacles inside the plan's inclusion fence, clear of its exclusion zone and waypoints."""
+    plan = json.loads((ROOT / "missions" / "boulder_fence.plan").read_text())
+    world = load_world(ROOT / "missions" / "worlds" / "boulder_fence.geojson")
+    home = plan["mission"]["plannedHomePosition"]
+    assert (world.home.lat_deg, world.home.lon_deg) == pytest.approx(tuple(home[:2]))
+    frame = LocalFrame(world.home.lat_deg, world.home.lon_deg)
+    shapes = [o.shape(0.0) for o in world.local(frame).obstacles]
+
+    def local_polygon(points):
+        return Polygon([frame.to_en(lat, lon) for lat, lon in points])
+
+    fences = plan["geoFence"]["polygons"]
+    inclusion = [local_polygon(f["polygon"]) for f in fences if f["inclusion"]]
+    exclusion = [local_polygon(f["polygon"]) for f in fences if not f["inclusion"]]
+    waypoints = [Point(frame.to_en(i["params"][4], i["params"][5])) for i in plan["mission"]["items"] if i.get("command") == 16]
+    assert inclusion and exclusion and waypoints
+    for shape in shapes:
+        assert all(zone.contains(shape) for zone in inclusion)
+        assert all(shape.distance(zone) > 2.0 for zone in exclusion)
+        assert all(shape.distance(w) > 3.0 for w in waypoints)
