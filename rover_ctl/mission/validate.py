@@ -14,7 +14,8 @@ from collections.abc import Mapping
 
 from rover_ctl.mission.model import (
     FENCE_CIRCLE_COMMANDS,
-    FENCE_POLYGON_COMMANDS,
+    FENCE_COMMANDS,
+    NAV_POSITION_COMMANDS,
     SUPPORTED_COMMANDS,
     Cmd,
     Mission,
@@ -24,6 +25,8 @@ from rover_ctl.mission.model import (
 )
 from rover_ctl.mission.parsing import HOME_INDEX
 
+MAX_LAT_DEG = 90.0
+MAX_LON_DEG = 180.0
 MIN_POLYGON_VERTICES = 3
 SPEED_PARAM_UNCHANGED = -1.0
 """DO_CHANGE_SPEED param2 of -1 (or any value <= 0) leaves the speed unchanged."""
@@ -69,13 +72,9 @@ def _whole(value: float) -> bool:
     return math.isfinite(value) and value == int(value)
 
 
-def _check_position(item: MissionItem, where: str, errors: list[str], required: bool) -> None:
-    """Latitude/longitude in range; NaN allowed only where the command takes no position."""
-    if not item.is_global:
-        if required:
-            errors.append(f"{where}: {command_name(item.command)} needs a global frame for its position, got frame {item.frame}")
-        return
-    for name, value, limit in (("latitude", item.x, 90.0), ("longitude", item.y, 180.0)):
+def _check_latlon(lat_deg: float, lon_deg: float, where: str, errors: list[str], required: bool) -> None:
+    """Latitude/longitude in range; NaN allowed only where no position is ``required``."""
+    for name, value, limit in (("latitude", lat_deg, MAX_LAT_DEG), ("longitude", lon_deg, MAX_LON_DEG)):
         if math.isnan(value):
             if required:
                 errors.append(f"{where}: {name} is missing (NaN)")
@@ -83,12 +82,20 @@ def _check_position(item: MissionItem, where: str, errors: list[str], required: 
             errors.append(f"{where}: {name} {value:.10g} out of range [-{limit:g}, {limit:g}]")
 
 
+def _check_position(item: MissionItem, where: str, errors: list[str], required: bool) -> None:
+    """A global item's coordinates; a ``required`` position also needs a global frame."""
+    if item.is_global:
+        _check_latlon(item.x, item.y, where, errors, required)
+    elif required:
+        errors.append(f"{where}: {command_name(item.command)} needs a global frame for its position, got frame {item.frame}")
+
+
 def _check_mission(mission: Mission, max_speed_mps: float, label, errors: list[str], warnings: list[str]) -> None:
     count = len(mission.items)
     for index, item in enumerate(mission.items):
         where = label(MissionType.MISSION, index)
         command = item.command
-        _check_position(item, where, errors, required=command in (Cmd.NAV_WAYPOINT, Cmd.NAV_LOITER_TIME))
+        _check_position(item, where, errors, required=command in NAV_POSITION_COMMANDS)
         if command == Cmd.DO_JUMP:
             target, repeat = item.param1, item.param2
             if not _whole(target) or not 1 <= target <= count:
@@ -128,10 +135,10 @@ def _check_fence(mission: Mission, label, errors: list[str]) -> None:
     for index, item in enumerate(fence):
         where = label(MissionType.FENCE, index)
         _check_position(item, where, errors, required=True)
-        if item.command in FENCE_CIRCLE_COMMANDS and not (math.isfinite(item.param1) and item.param1 > 0.0):
-            errors.append(f"{where}: fence circle radius {item.param1:g} m must be > 0")
-        elif item.command not in FENCE_POLYGON_COMMANDS | FENCE_CIRCLE_COMMANDS | {Cmd.NAV_FENCE_RETURN_POINT}:
+        if item.command not in FENCE_COMMANDS:
             errors.append(f"{where}: {describe(item.command)} is not a fence item")
+        elif item.command in FENCE_CIRCLE_COMMANDS and not (math.isfinite(item.param1) and item.param1 > 0.0):
+            errors.append(f"{where}: fence circle radius {item.param1:g} m must be > 0")
     returns = sum(item.command == Cmd.NAV_FENCE_RETURN_POINT for item in fence)
     if returns > 1:
         errors.append(f"{label(MissionType.FENCE, 0)}: the fence has {returns} return points (at most 1)")
@@ -159,9 +166,7 @@ def validate(
         return _label(labels, kind, index)
 
     if mission.home is not None:
-        for name, value, limit in (("latitude", mission.home.lat_deg, 90.0), ("longitude", mission.home.lon_deg, 180.0)):
-            if not -limit <= value <= limit:
-                errors.append(f"{label(MissionType.MISSION, HOME_INDEX)}: home {name} {value:g} out of range")
+        _check_latlon(mission.home.lat_deg, mission.home.lon_deg, label(MissionType.MISSION, HOME_INDEX), errors, required=True)
     _check_mission(mission, max_speed_mps, label, errors, warnings)
     _check_fence(mission, label, errors)
     _check_rally(mission, label, errors)

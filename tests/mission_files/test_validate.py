@@ -6,7 +6,7 @@ import pytest
 
 from rover_ctl.config import RobotParams
 from rover_ctl.mission.files import load_mission
-from rover_ctl.mission.model import FRAME_MISSION, Cmd, Home, Mission, MissionItem
+from rover_ctl.mission.model import FRAME_GLOBAL, FRAME_MISSION, Cmd, Home, Mission, MissionItem
 from rover_ctl.mission.validate import validate
 
 MAX_MPS = RobotParams().max_speed_mps
@@ -94,8 +94,6 @@ def test_supported_mission_is_clean():
 
 
 def test_fence_with_two_return_points_and_wrong_items():
-    from rover_ctl.mission.model import FRAME_GLOBAL
-
     fence = [
         MissionItem(Cmd.NAV_FENCE_RETURN_POINT, x=1.0, y=2.0),
         MissionItem(Cmd.NAV_FENCE_RETURN_POINT, x=1.0, y=2.0),
