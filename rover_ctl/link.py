@@ -306,13 +306,18 @@ class VehicleLink:
         self.conn.mav.timesync_send(int(self._wall() * 1e9), marker.ts1_ns)
 
     def request_streams(self, rates_hz: dict[str, float], extra1_hz: float) -> None:
-        """Ask for message rates (fire and forget: the vehicle sends what it can, we cope)."""
-        for name, hz in rates_hz.items():
-            msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
-            self.command_async(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+        """Ask for message rates (the vehicle sends what it can, we cope). EXTRA1 first: on
+        ArduPilot it sets ATTITUDE, SIMSTATE and WHEEL_DISTANCE together, then the per-message
+        intervals refine the others. Each interval is a separate command (ACKs keyed by
+        command id would replace each other), so they are sent without waiting for ACKs."""
         self.conn.mav.request_data_stream_send(
             self.target_system, self.target_component, mavlink.MAV_DATA_STREAM_EXTRA1, int(round(extra1_hz)), 1
         )
+        for name, hz in rates_hz.items():
+            msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+            self.conn.mav.command_long_send(
+                self.target_system, self.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0
+            )
 
     def param_set(self, name: str, value: float) -> None:
         self.conn.mav.param_set_send(

@@ -1,0 +1,63 @@
+"""``rover-ctl run``: the controller daemon (see rover_ctl.daemon and docs/daemon.md).
+
+Exit codes (sysexits): 0 stopped by SIGINT/SIGTERM, 2 bad flag or config (``rover-ctl`` usage
+errors), 69 no vehicle answered, 70 the control loop failed. A service manager restarts on
+69/70 and does not on 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from rover_ctl.config import ConfigError, load_config
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser("run", help="run the controller daemon", description=__doc__.splitlines()[0])
+    parser.add_argument("--vehicle", metavar="URL", help="vehicle link, pymavlink connection string (default: link.vehicle_url, tcp:127.0.0.1:5760)")
+    parser.add_argument("--gcs", metavar="URL", help="GCS link (default: link.gcs_url, udpout:127.0.0.1:14550)")
+    parser.add_argument("--config", metavar="FILE", help="TOML config file (sections as rover_ctl.config)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="override one config value (repeatable)")
+    parser.add_argument("--rulebase", default="default", metavar="NAME|FILE", help="fuzzy rule base: shipped name (paper, default) or a TOML file")
+    parser.add_argument("--log-dir", metavar="DIR", help="write vehicle.tlog, gcs.tlog, control.csv and events.jsonl here")
+    parser.add_argument("--mission-store", metavar="FILE", help="where the uploaded mission persists (default: gcs.mission_store_path; '' for none)")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rover_ctl.cli import UserError
+
+    overrides = list(args.set)
+    if args.vehicle:
+        overrides.append(f"link.vehicle_url={args.vehicle}")
+    if args.gcs:
+        overrides.append(f"link.gcs_url={args.gcs}")
+    if args.mission_store is not None:
+        overrides.append(f"gcs.mission_store_path={args.mission_store}")
+    try:
+        config = load_config(args.config, overrides)
+    except ConfigError as exc:
+        raise UserError(str(exc)) from None
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    from rover_ctl.daemon import Daemon
+    from rover_ctl.fuzzy import RuleBaseError
+
+    try:
+        daemon = Daemon(config, rulebase=args.rulebase, log_dir=args.log_dir)
+    except (RuleBaseError, FileNotFoundError, ValueError) as exc:
+        raise UserError(f"--rulebase {args.rulebase}: {exc}") from None
+
+    def on_signal(signum, frame) -> None:
+        daemon.stop()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    return daemon.run()

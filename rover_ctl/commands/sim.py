@@ -1,0 +1,96 @@
+"""``rover-ctl sim MISSION``: the emulator and the daemon, a mission run end to end, a report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0 or math.isnan(value):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser("sim", help="run a mission against the emulator and write a report", description=__doc__.splitlines()[0])
+    parser.add_argument("mission", type=Path, metavar="MISSION", help="mission file (.waypoints, .txt or .plan)")
+    world = parser.add_mutually_exclusive_group()
+    world.add_argument("--world", type=Path, metavar="GEOJSON", help="emulator world (obstacles, faults)")
+    world.add_argument("--obstacles", type=int, metavar="N", help="N seeded random obstacles along the mission legs")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the emulator's random draws (default 1)")
+    parser.add_argument("--rulebase", default="default", metavar="NAME|FILE", help="fuzzy rule base (default: default)")
+    timing = parser.add_mutually_exclusive_group()
+    timing.add_argument("--lockstep", action="store_true", help="lockstep with the emulator (default; deterministic, as fast as possible)")
+    timing.add_argument("--speedup", type=_positive, metavar="X", help="free-running emulator at X times real time")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="report folder (default runs/<mission>-<time>)")
+    parser.add_argument("--json", action="store_true", help="print the metrics JSON on stdout (progress goes to stderr)")
+    parser.add_argument("--timeout-s", type=_positive, default=600.0, metavar="S", help="sim-time budget of the mission (default 600)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="daemon config override (repeatable)")
+    parser.add_argument("--sitl-param", action="append", default=[], metavar="NAME=VALUE", help="emulator parameter, e.g. a SIM_* fault (repeatable)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.live import Live
+    from rich.table import Table
+
+    from rover_ctl.cli import UserError
+    from rover_ctl.mission.files import MissionFileError
+    from rover_ctl.report import ReportError
+    from rover_ctl.sim import Progress, SimError, SimOptions, simulate
+
+    if args.obstacles is not None and args.obstacles < 0:
+        raise UserError(f"--obstacles {args.obstacles}: expected a count >= 0")
+    if args.world is not None and not args.world.is_file():
+        raise UserError(f"--world {args.world}: no such file")
+    out = args.out or Path("runs") / f"{args.mission.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    options = SimOptions(
+        mission=args.mission, out=out, world=args.world, obstacles=args.obstacles, seed=args.seed,
+        rulebase=args.rulebase, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
+        timeout_s=args.timeout_s, config_overrides=args.set, sitl_params=args.sitl_param,
+    )  # fmt: skip
+    console = Console(stderr=args.json)
+
+    def table(p: Progress) -> Table:
+        t = Table(title=f"rover-ctl sim {args.mission.name}", show_header=False)
+        t.add_row("waypoint", f"{p.current_seq} of {len(p.reached)}/{p.waypoints_total} reached")
+        t.add_row("distance left", "-" if math.isnan(p.distance_left_m) else f"{p.distance_left_m:.1f} m")
+        t.add_row("elapsed", f"sim {p.elapsed_sim_s:.1f} s, wall {p.elapsed_wall_s:.1f} s")
+        t.add_row("collisions", str(p.collisions))
+        t.add_row("status", p.last_text or "-")
+        return t
+
+    try:
+        with Live(table(Progress()), console=console, refresh_per_second=4, transient=False) as live:
+            last = [0.0]
+
+            def on_tick(p: Progress) -> None:
+                if time.monotonic() - last[0] > 0.25:
+                    last[0] = time.monotonic()
+                    live.update(table(p))
+
+            metrics = simulate(options, on_tick)
+    except MissionFileError as exc:
+        raise UserError(str(exc)) from None
+    except (SimError, ReportError) as exc:
+        raise UserError(str(exc)) from None
+    if args.json:
+        print(json.dumps(metrics, indent=2))
+    else:
+        verdict = "[green]success[/]" if metrics["success"] else "[red]failed[/]"
+        console.print(
+            f"{verdict}: {metrics['waypoints_reached']}/{metrics['waypoints_total']} waypoints, "
+            f"{metrics['collisions']} collisions, {metrics['path_length_m']} m driven in {metrics['duration_s']} s"
+        )
+        console.print(f"report: {out}/ (metrics.json, map.png, motors.png, tracking.png, vehicle.tlog, control.csv)")
+    return 0 if metrics["success"] else 1

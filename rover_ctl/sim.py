@@ -1,0 +1,379 @@
+"""``rover-ctl sim``: run a mission against the emulator, end to end, and write a report.
+
+Three processes, as in the field: ``rover-sitl`` (the rover), ``rover-ctl run`` (the daemon) and
+this one, which plays the ground station. ``SimRun`` starts the two children (``sys.executable
+-m ...``), waits for the emulator's ``ready`` line, uploads the mission over the GCS link with the
+mission client, arms, starts AUTO and watches the GCS link until the mission completes or the
+sim-time budget runs out. It also listens on a second emulator endpoint (sysid 254, never allowed
+to drive) to see collisions and to set the emulator's SIM_* fault parameters (tests use it).
+
+Ports are chosen free on 127.0.0.1: the vehicle link is TCP (the daemon connects to the
+emulator's ``tcpin``), the GCS link UDP (the daemon sends to where we listen, as it sends to
+QGroundControl), the watcher UDP.
+
+The report (``rover_ctl.report``) is written into the output folder with both tlogs, the control
+CSV, the event log, the emulator's truth log and the processes' logs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
+
+from rover_ctl.geo import LocalFrame  # noqa: E402
+from rover_ctl.mission.client import MissionClient  # noqa: E402
+from rover_ctl.mission.files import load_mission  # noqa: E402
+from rover_ctl.mission.model import Mission  # noqa: E402
+
+WATCHER_SYSID = 254
+"""Our id on the emulator's second endpoint: not SYSID_MYGCS, so it can never drive the rover."""
+SITL_READY_TIMEOUT_S = 30.0
+"""Wall seconds for the emulator to print its ready line."""
+GCS_CONNECT_TIMEOUT_S = 30.0
+"""Wall seconds for the daemon's first heartbeat on the GCS link."""
+STALL_TIMEOUT_S = 20.0
+"""Wall seconds without any message from the daemon before the run is declared stuck."""
+ARM_RETRY_S = 1.0
+"""Wall seconds between arming attempts while the daemon waits for its first GPS fix."""
+STOP_TIMEOUT_S = 10.0
+"""Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
+MODE_AUTO = 10
+MODE_HOLD = 4
+
+
+class SimError(RuntimeError):
+    """The run could not be set up or a child process failed; one line."""
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@dataclass
+class SimOptions:
+    mission: Path
+    out: Path
+    world: Path | None = None
+    obstacles: int | None = None
+    seed: int = 1
+    rulebase: str = "default"
+    lockstep: bool = True
+    speedup: float = 1.0
+    timeout_s: float = 600.0
+    """Budget in sim seconds from the start of AUTO."""
+    config_overrides: list[str] = field(default_factory=list)
+    sitl_params: list[str] = field(default_factory=list)
+    """NAME=VALUE for the emulator's --param (e.g. SIM_GPS_GLITCH_X=5)."""
+
+
+@dataclass
+class Progress:
+    """What the ground station sees, for the live display."""
+
+    sim_time_s: float = 0.0
+    started_sim_s: float | None = None
+    wall_started: float = field(default_factory=time.monotonic)
+    current_seq: int = 0
+    waypoints_total: int = 0
+    reached: set[int] = field(default_factory=set)
+    distance_left_m: float = math.nan
+    collisions: int = 0
+    mode: int = MODE_HOLD
+    armed: bool = False
+    complete: bool = False
+    last_text: str = ""
+    position_en: tuple[float, float] | None = None
+
+    @property
+    def elapsed_sim_s(self) -> float:
+        return 0.0 if self.started_sim_s is None else self.sim_time_s - self.started_sim_s
+
+    @property
+    def elapsed_wall_s(self) -> float:
+        return time.monotonic() - self.wall_started
+
+
+class SimRun:
+    """The emulator and the daemon as child processes plus our GCS and watcher connections."""
+
+    def __init__(self, options: SimOptions):
+        self.options = options
+        self.out = Path(options.out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        loaded = load_mission(options.mission)
+        self.mission: Mission = loaded.mission
+        self.warnings = loaded.warnings
+        if not self.mission.items:
+            raise SimError(f"{options.mission}: the mission has no items")
+        self.home = self.mission.home
+        self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home.alt_m) if self.home else None
+        self.targets = {seq: (item.x, item.y) for seq, item in enumerate(self.mission.items, 1) if item.is_global and (item.x or item.y)}
+        self.progress = Progress(waypoints_total=sum(i.command in (16, 19, 20) for i in self.mission.items))
+        self.world_path: Path | None = options.world
+        self.sitl: subprocess.Popen | None = None
+        self.daemon: subprocess.Popen | None = None
+        self.gcs: MissionClient | None = None
+        self.watcher: Any = None
+        self.vehicle_port = free_port(socket.SOCK_STREAM)
+        self.gcs_port = free_port(socket.SOCK_DGRAM)
+        self.watch_port = free_port(socket.SOCK_DGRAM)
+        self._logs: list[Any] = []
+        self._last_rx_wall = time.monotonic()
+        self._param_ack: dict[str, float] = {}
+
+    # ---- processes -------------------------------------------------------------------------
+
+    def _sitl_command(self) -> list[str]:
+        o = self.options
+        cmd = [sys.executable, "-m", "sitl", "--endpoint", f"tcpin:127.0.0.1:{self.vehicle_port}",
+               "--endpoint", f"udpin:127.0.0.1:{self.watch_port}", "--seed", str(o.seed),
+               "--truth-log", str(self.out / "truth.jsonl")]  # fmt: skip
+        cmd += ["--lockstep"] if o.lockstep else ["--speedup", f"{o.speedup:g}"]
+        heading = 0.0
+        if o.world is not None:
+            cmd += ["--world", str(o.world)]
+            home = json.loads(Path(o.world).read_text(encoding="utf-8")).get("home")
+            heading = float(home[3]) if home and len(home) > 3 else 0.0
+        if self.home is not None:
+            cmd += [f"--home={self.home.lat_deg},{self.home.lon_deg},{self.home.alt_m},{heading}"]
+        if o.obstacles:
+            legs = [(self.home.lat_deg, self.home.lon_deg)] if self.home else []
+            legs += [self.targets[s] for s in sorted(self.targets)]
+            self.world_path = self.out / "world.geojson"
+            cmd += ["--scatter", str(o.obstacles), "--along=" + ";".join(f"{lat},{lon}" for lat, lon in legs),
+                    "--write-world", str(self.world_path)]  # fmt: skip
+        for item in o.sitl_params:
+            cmd += ["--param", item]
+        return cmd
+
+    def _daemon_command(self) -> list[str]:
+        o = self.options
+        cmd = [sys.executable, "-m", "rover_ctl.cli", "run", "--vehicle", f"tcp:127.0.0.1:{self.vehicle_port}",
+               "--gcs", f"udpout:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-dir", str(self.out),
+               "--mission-store", ""]  # fmt: skip
+        for item in o.config_overrides:
+            cmd += ["--set", item]
+        return cmd
+
+    def start(self) -> None:
+        """Start both children, connect the GCS and the watcher, upload the mission."""
+        sitl_log = open(self.out / "sitl.log", "w")
+        self._logs.append(sitl_log)
+        self.sitl = subprocess.Popen(self._sitl_command(), stdout=subprocess.PIPE, stderr=sitl_log, text=True)
+        self._wait_ready()
+        daemon_log = open(self.out / "daemon.log", "w")
+        self._logs.append(daemon_log)
+        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
+        self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
+                                                  source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
+        self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        self.gcs = MissionClient(f"udpin:127.0.0.1:{self.gcs_port}")
+        deadline = time.monotonic() + GCS_CONNECT_TIMEOUT_S
+        while True:
+            self._check_children()
+            try:
+                self.gcs.connect()
+                break
+            except Exception as exc:  # MissionClientError: not up yet
+                if time.monotonic() > deadline:
+                    raise SimError(f"daemon: no heartbeat on the GCS link within {GCS_CONNECT_TIMEOUT_S:g} s ({exc}); see {self.out / 'daemon.log'}") from None
+        self.gcs.upload(self.mission)
+
+    def _wait_ready(self) -> None:
+        deadline = time.monotonic() + SITL_READY_TIMEOUT_S
+        lines = []
+        while time.monotonic() < deadline:
+            line = self.sitl.stdout.readline()
+            if not line:
+                break
+            lines.append(line.strip())
+            if " ready " in line or line.startswith("rover-sitl: ready"):
+                (self.out / "sitl.out").write_text("\n".join(lines) + "\n")
+                return
+        self.sitl.poll()
+        log_text = (self.out / "sitl.log").read_text() if (self.out / "sitl.log").exists() else ""
+        last = (log_text.strip().splitlines() or lines or ["no output"])[-1]
+        raise SimError(f"rover-sitl did not start: {last}")
+
+    def _check_children(self) -> None:
+        for name, proc, log_name in (("rover-sitl", self.sitl, "sitl.log"), ("rover-ctl run", self.daemon, "daemon.log")):
+            if proc is not None and proc.poll() is not None:
+                text = (self.out / log_name).read_text(errors="replace").strip().splitlines()
+                raise SimError(f"{name} exited with status {proc.returncode}: {text[-1] if text else 'no output'}")
+
+    def stop(self) -> None:
+        """Daemon first (it sets motors neutral), then the emulator; kill what does not exit."""
+        for proc, sig in ((self.daemon, signal.SIGINT), (self.sitl, signal.SIGTERM)):
+            if proc is None or proc.poll() is not None:
+                continue
+            proc.send_signal(sig)
+            try:
+                proc.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        if self.sitl is not None and self.sitl.stdout:
+            rest = self.sitl.stdout.read()
+            with open(self.out / "sitl.out", "a") as handle:
+                handle.write(rest)
+        for conn in (self.gcs, self.watcher):
+            if conn is not None:
+                conn.close()
+        for handle in self._logs:
+            handle.close()
+
+    def __enter__(self) -> "SimRun":
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # ---- ground-station actions ---------------------------------------------------------------
+
+    def command(self, command: int, *params: float, timeout_s: float = 5.0) -> int:
+        """COMMAND_LONG to the daemon; returns the MAV_RESULT (-1: no answer). Messages seen
+        while waiting update the progress."""
+        target = self.gcs.target
+        padded = tuple(params) + (0.0,) * (7 - len(params))
+        deadline = time.monotonic() + timeout_s
+        next_send = 0.0
+        while time.monotonic() < deadline:
+            if time.monotonic() >= next_send:
+                self.gcs.conn.mav.command_long_send(target[0], target[1], command, 0, *padded)
+                next_send = time.monotonic() + 1.0
+            msg = self.gcs.conn.recv_match(blocking=True, timeout=0.1)
+            if msg is None:
+                self._check_children()
+                continue
+            self._observe(msg)
+            if msg.get_type() == "COMMAND_ACK" and msg.command == command:
+                return msg.result
+        return -1
+
+    def arm(self, timeout_s: float = 30.0) -> None:
+        """Arm once the daemon has a home (it refuses before its first fix), wait for the flag."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED:
+                if self.wait_for(lambda p: p.armed, wall_timeout_s=ARM_RETRY_S * 3):
+                    return
+            self.wait_for(lambda p: False, wall_timeout_s=ARM_RETRY_S)
+        raise SimError(f"the rover did not arm within {timeout_s:g} s: {self.progress.last_text}")
+
+    def set_mode(self, custom_mode: int) -> int:
+        return self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode)
+
+    def start_mission(self) -> None:
+        result = self.command(mav.MAV_CMD_MISSION_START, 0, 0)
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise SimError(f"MISSION_START refused (result {result}): {self.progress.last_text}")
+
+    def sitl_param(self, name: str, value: float, timeout_s: float = 5.0) -> None:
+        """PARAM_SET on the emulator (fault injection), confirmed by its PARAM_VALUE."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.watcher.mav.param_set_send(1, 1, name.encode(), float(value), mav.MAV_PARAM_TYPE_REAL32)
+            end = time.monotonic() + 0.5
+            while time.monotonic() < end:
+                self.poll(0.05)
+                if self._param_ack.get(name) == float(value):
+                    return
+        raise SimError(f"rover-sitl did not confirm {name}={value:g}")
+
+    # ---- watching ----------------------------------------------------------------------------
+
+    def poll(self, wait_s: float = 0.05) -> None:
+        """Read what both connections have (waiting up to ``wait_s`` for the GCS link)."""
+        msg = self.gcs.conn.recv_match(blocking=True, timeout=wait_s)
+        while msg is not None:
+            self._observe(msg)
+            msg = self.gcs.conn.recv_msg()
+        while (msg := self.watcher.recv_msg()) is not None:
+            kind = msg.get_type()
+            if kind == "STATUSTEXT" and "collision" in msg.text.lower():
+                self.progress.collisions += 1
+            elif kind == "PARAM_VALUE":
+                self._param_ack[msg.param_id] = float(msg.param_value)
+        self._check_children()
+
+    def _observe(self, msg: Any) -> None:
+        p = self.progress
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            return
+        self._last_rx_wall = time.monotonic()
+        if kind == "HEARTBEAT":
+            p.mode = msg.custom_mode
+            p.armed = bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+        elif kind == "GLOBAL_POSITION_INT":
+            p.sim_time_s = msg.time_boot_ms / 1000.0
+            if self.frame is not None:
+                p.position_en = self.frame.to_enu(msg.lat / 1e7, msg.lon / 1e7)
+                target = self.targets.get(p.current_seq)
+                if target is not None:
+                    te, tn = self.frame.to_enu(*target)
+                    p.distance_left_m = math.dist(p.position_en, (te, tn))
+        elif kind == "MISSION_CURRENT":
+            p.current_seq = msg.seq
+        elif kind == "MISSION_ITEM_REACHED":
+            p.reached.add(msg.seq)
+        elif kind == "STATUSTEXT":
+            p.last_text = msg.text
+            if msg.text.startswith("Mission complete"):
+                p.complete = True
+
+    def wait_for(self, predicate: Callable[[Progress], bool], sim_timeout_s: float | None = None,
+                 wall_timeout_s: float | None = None, on_tick: Callable[[Progress], None] | None = None) -> bool:  # fmt: skip
+        """Watch until ``predicate(progress)``; False on a sim or wall timeout. Raises SimError if
+        a child dies or the daemon goes silent."""
+        sim_end = None if sim_timeout_s is None else self.progress.sim_time_s + sim_timeout_s
+        wall_end = None if wall_timeout_s is None else time.monotonic() + wall_timeout_s
+        while not predicate(self.progress):
+            if sim_end is not None and self.progress.sim_time_s >= sim_end:
+                return False
+            if wall_end is not None and time.monotonic() >= wall_end:
+                return False
+            if time.monotonic() - self._last_rx_wall > STALL_TIMEOUT_S:
+                raise SimError(f"no message from the daemon for {STALL_TIMEOUT_S:g} s; see {self.out / 'daemon.log'}")
+            self.poll()
+            if on_tick:
+                on_tick(self.progress)
+        return True
+
+    def run_mission(self, on_tick: Callable[[Progress], None] | None = None) -> bool:
+        """Arm, MISSION_START, watch to the end. True if complete within the budget."""
+        self.arm()
+        self.start_mission()
+        self.progress.started_sim_s = self.progress.sim_time_s
+        return self.wait_for(lambda p: p.complete, sim_timeout_s=self.options.timeout_s, on_tick=on_tick)
+
+
+def simulate(options: SimOptions, on_tick: Callable[[Progress], None] | None = None, plots: bool = True) -> dict[str, Any]:
+    """The whole ``rover-ctl sim``: run, stop, report. Returns the metrics."""
+    from rover_ctl.report import write_report
+
+    with SimRun(options) as run:
+        complete = run.run_mission(on_tick)
+    metrics = write_report(options.out, run.world_path, timed_out=not complete, plots=plots)
+    metrics["out"] = str(options.out)
+    return metrics
