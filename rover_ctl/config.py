@@ -269,8 +269,10 @@ class DaemonParams:
     """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE."""
     gps_rate_hz: float = 5.0
     rangefinder_rate_hz: float = 20.0
-    telemetry_rate_hz: float = 4.0
-    """GLOBAL_POSITION_INT / ATTITUDE / MISSION_CURRENT to the ground station."""
+    truth_rate_hz: float = 10.0
+    """SIMSTATE (emulator ground truth, logged for evaluation; a real vehicle ignores the request)."""
+    stream_rerequest_s: float = 3.0
+    """After this long without vehicle messages the stream rates are asked for again."""
     idle_wait_s: float = 0.05
     """Longest blocking wait for link input in one loop turn (wall clock; bounds reaction to GCS)."""
     hold_speed_mps: float = 0.05
