@@ -31,7 +31,7 @@ inside an exclusion zone, a known or blocked obstacle, or outside an inclusion f
 unreachable: ``plan_leg`` returns a ``Path`` whose ``error`` says why (no exception).
 
 API:
-    Fence.from_items(items, to_enu) -> Fence       decode MAV_CMD_NAV_FENCE_* items (5001-5004)
+    Fence.from_items(items, to_enu) -> Fence       the fence of MAV_CMD_NAV_FENCE_* items, in ENU
     Planner(params, robot, fence=Fence(), polygons=(), circles=())
       .plan_leg(start_en, goal_en) -> Path        Path.error is None when a path was found
       .plan_route(start_en, goals_en) -> Path     the legs joined (for the planned-path plot)
@@ -59,7 +59,8 @@ from shapely.geometry.polygon import orient
 from shapely.ops import nearest_points, unary_union
 
 from rover_ctl.config import PlannerParams, RobotParams
-from rover_ctl.mission.model import MissionItem
+from rover_ctl.mission.model import Mission, MissionItem, polygon_runs
+from rover_ctl.mission.validate import validate
 
 EN = tuple[float, float]
 
@@ -68,13 +69,6 @@ NODE_OFFSET_M = 0.02
 
 UNBOUNDED_M = 1.0e6
 """Half-size of the square that stands for the plane when there is no inclusion fence."""
-
-FENCE_POLYGON_INCLUSION = 5001
-FENCE_POLYGON_EXCLUSION = 5002
-FENCE_CIRCLE_INCLUSION = 5003
-FENCE_CIRCLE_EXCLUSION = 5004
-FENCE_RETURN_POINT = 5000
-
 
 class FenceError(ValueError):
     """Fence items that do not describe valid polygons/circles; the message names the item."""
@@ -98,41 +92,23 @@ class Fence:
 
     @classmethod
     def from_items(cls, items: Sequence[MissionItem], to_enu: Callable[[float, float], EN]) -> "Fence":
-        """Decode fence items: polygon vertices (5001 inclusion / 5002 exclusion) come as runs of
-        consecutive items whose param1 is the vertex count; circles (5003/5004) have param1 = radius
-        in metres; a return point (5000) is ignored. ``to_enu(lat, lon)`` is the local frame."""
-        polygons: dict[int, list] = {FENCE_POLYGON_INCLUSION: [], FENCE_POLYGON_EXCLUSION: []}
-        circles: dict[int, list] = {FENCE_CIRCLE_INCLUSION: [], FENCE_CIRCLE_EXCLUSION: []}
-        index = 0
-        while index < len(items):
-            item = items[index]
-            if item.command in polygons:
-                count = int(item.param1)
-                run = items[index : index + count]
-                if count < 3:
-                    raise FenceError(f"fence item {index}: polygon with {count} vertices (needs at least 3)")
-                if len(run) < count or any(v.command != item.command or int(v.param1) != count for v in run):
-                    raise FenceError(f"fence item {index}: polygon declares {count} vertices but the run of items is shorter")
-                vertices = tuple(tuple(map(float, to_enu(v.x, v.y))) for v in run)
-                if not Polygon(vertices).is_valid:
-                    raise FenceError(f"fence item {index}: polygon of {count} vertices intersects itself")
-                polygons[item.command].append(vertices)
-                index += count
-            elif item.command in circles:
-                if not item.param1 > 0:
-                    raise FenceError(f"fence item {index}: circle radius {item.param1} m is not positive")
-                circles[item.command].append(Circle(tuple(map(float, to_enu(item.x, item.y))), float(item.param1)))
-                index += 1
-            elif item.command == FENCE_RETURN_POINT:
-                index += 1
-            else:
-                raise FenceError(f"fence item {index}: command {item.command} is not a fence command (5000-5004)")
-        return cls(
-            tuple(polygons[FENCE_POLYGON_INCLUSION]),
-            tuple(polygons[FENCE_POLYGON_EXCLUSION]),
-            tuple(circles[FENCE_CIRCLE_INCLUSION]),
-            tuple(circles[FENCE_CIRCLE_EXCLUSION]),
-        )
+        """The fence of MAV_CMD_NAV_FENCE_* items (mission_type FENCE), via the mission model's
+        typed views; ``to_enu(lat, lon)`` is the local frame. Raises ``FenceError`` naming the
+        first bad item (validation of ``rover_ctl.mission.validate``, plus self-intersection)."""
+        mission = Mission(fence=list(items))
+        errors, _ = validate(mission, math.inf)
+        if errors:
+            raise FenceError(errors[0])
+        polygons: dict[bool, list] = {True: [], False: []}
+        for index, polygon in zip((start for start, _ in polygon_runs(mission.fence)), mission.fence_polygons()):
+            vertices = tuple(tuple(map(float, to_enu(lat, lon))) for lat, lon in polygon.vertices_latlon)
+            if not Polygon(vertices).is_valid:
+                raise FenceError(f"fence item {index}: polygon of {len(vertices)} vertices intersects itself")
+            polygons[polygon.inclusion].append(vertices)
+        circles: dict[bool, list] = {True: [], False: []}
+        for circle in mission.fence_circles():
+            circles[circle.inclusion].append(Circle(tuple(map(float, to_enu(*circle.center_latlon))), float(circle.radius_m)))
+        return cls(tuple(polygons[True]), tuple(polygons[False]), tuple(circles[True]), tuple(circles[False]))
 
 
 @dataclass(frozen=True)

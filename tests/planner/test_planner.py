@@ -177,9 +177,10 @@ def test_follower_reports_unreachable_goal_and_retries():
     "items, message",
     [
         ([MissionItem(5001, param1=4, x=0, y=0)] * 3, "declares 4 vertices"),
-        ([MissionItem(5002, param1=2, x=0, y=0)] * 2, "at least 3"),
+        ([MissionItem(5002, param1=2, x=0, y=0)] * 2, ">= 3"),
         ([MissionItem(5004, param1=0, x=0, y=0)], "radius"),
-        ([MissionItem(16)], "not a fence command"),
+        ([MissionItem(16)], "not a fence item"),
+        ([MissionItem(5001, param1=4, x=x, y=y) for x, y in [(0, 0), (1, 1), (0, 1), (1, 0)]], "intersects itself"),
     ],
 )
 def test_bad_fence_items_are_refused_with_the_item_named(items, message):
