@@ -98,14 +98,16 @@ class SimRover:
     # ------------------------------------------------------------------ actuation and time
 
     def set_motor_pwm(self, left_us: float, right_us: float) -> None:
-        """Motor PWM, 1000..2000 us (1500 neutral), held until the next call."""
+        """Motor PWM, 1000..2000 us (1500 neutral; beyond is clamped), held until the next call."""
+        if not (math.isfinite(left_us) and math.isfinite(right_us)):
+            raise ValueError(f"set_motor_pwm: PWM must be finite, got {left_us!r}, {right_us!r}")
         self.pwm_left_us, self.pwm_right_us = left_us, right_us
         self.drive.set_volts(self.drive.pwm_to_volts(left_us), self.drive.pwm_to_volts(right_us))
 
     def step(self, dt_s: float) -> list[Event]:
         """Advance sim time by ``dt_s`` (whole 1 ms substeps; fractions carry to the next call)."""
-        if dt_s < 0:
-            raise ValueError(f"step: dt_s must be >= 0, got {dt_s}")
+        if not (math.isfinite(dt_s) and dt_s >= 0):
+            raise ValueError(f"step: dt_s must be a finite number >= 0, got {dt_s}")
         self._target_s += dt_s
         target = round(self._target_s / self.params.physics_dt_s)
         while self._steps < target:

@@ -56,15 +56,19 @@ def test_full_throttle_drives_along_the_home_heading_and_truth_uses_compass_conv
     assert rover.attitude().yaw_rate_radps > 0.5
 
 
-def test_step_keeps_fractional_time_and_refuses_negative_steps():
+def test_step_keeps_fractional_time_and_refuses_bad_input():
     rover = SimRover(SitlParams(), World(), HOME, seed=1)
     for _ in range(10):
         rover.step(0.0025)
     assert rover.time_s == pytest.approx(0.025, abs=0.0011)
     drive_for(rover, 0.975, 0.0025)
     assert rover.time_s == pytest.approx(1.0)
-    with pytest.raises(ValueError):
-        rover.step(-0.1)
+    for bad in (-0.1, math.nan, math.inf):
+        with pytest.raises(ValueError, match="dt_s must be a finite number"):
+            rover.step(bad)
+    with pytest.raises(ValueError, match="PWM must be finite"):
+        rover.set_motor_pwm(math.nan, 1500)
+    assert rover.time_s == pytest.approx(1.0) and rover.pwm_left_us == 1500
 
 
 def test_driving_into_a_wall_is_one_collision_event_and_stops_the_rover():

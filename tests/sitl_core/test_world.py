@@ -162,7 +162,7 @@ def test_scatter_keeps_gaps_and_clear_waypoints_and_is_seeded():
     polyline = LineString([(p.x, p.y) for p in waypoints])
     for shape in shapes:
         assert min(shape.distance(w) for w in waypoints) >= 4.0 - 1e-6
-        assert shape.centroid.distance(polyline) <= 2.5 + 1e-6
+        assert shape.centroid.distance(polyline) <= 2.5 + 0.9  # centre within lateral_m, plus its size
     assert {o.kind for o in world.obstacles} == {"circle", "polygon"}
     assert parse_world(world.to_geojson()) == world
 
