@@ -19,9 +19,9 @@ Commands (anything else is skipped with a STATUSTEXT warning):
   left to do, so here it holds where it is, which is what a mission author means.)
 
 After the last item the mission is complete: an event, then hold. Modes: ``start`` (AUTO: resume
-the current item; restart when complete), ``rtl`` (RTL: drive home, then hold there), ``stop``
-(leave AUTO/RTL: idle, hold). ``set_current(seq)`` is MISSION_SET_CURRENT; ``restart`` goes back to
-seq 1 and clears the jump counts (MAV_CMD_MISSION_START).
+the current item; restart when complete), ``rtl`` (RTL: drive home, then hold there even if
+pushed off), ``stop`` (leave AUTO/RTL: idle, hold). ``set_current(seq)`` is MISSION_SET_CURRENT;
+``restart`` goes back to seq 1 and clears the jump counts (MAV_CMD_MISSION_START).
 
 API:
     MissionExecutor(items, to_enu, params, max_speed_mps, home_en=(0, 0))
@@ -130,6 +130,7 @@ class MissionExecutor:
         self._wait_until_s = 0.0
         self._target: EN | None = None
         self._fresh = True  # the current item has not been looked at yet
+        self._home_reached = False  # in RTL: once home, stay held there
 
     # -- commands from the daemon / GCS -------------------------------------------------------
 
@@ -165,6 +166,7 @@ class MissionExecutor:
     def rtl(self) -> list[Event]:
         """Enter RTL (failsafe or GCS): drive home, then hold there."""
         self.mode = Mode.RTL
+        self._home_reached = False
         return [Event(EventKind.STATUSTEXT, text="RTL: returning home")]
 
     def stop(self) -> None:
@@ -288,8 +290,11 @@ class MissionExecutor:
 
     def _rtl_step(self, position_en: EN, events: list[Event]) -> ExecutorOutput:
         speed = self.params.rtl_speed_mps if self.params.rtl_speed_mps > 0 else self._mission_speed_mps
-        home = math.dist(position_en, self.home_en) <= self.params.rtl_radius_m
-        return ExecutorOutput(self.home_en, min(speed, self.max_speed_mps), home, self.params.rtl_radius_m, self.current_seq, events)
+        if not self._home_reached and math.dist(position_en, self.home_en) <= self.params.rtl_radius_m:
+            self._home_reached = True
+            events.append(Event(EventKind.STATUSTEXT, text="RTL: reached home"))
+        speed = min(speed, self.max_speed_mps)
+        return ExecutorOutput(self.home_en, speed, self._home_reached, self.params.rtl_radius_m, self.current_seq, events)
 
     def _holding(self, events: list[Event]) -> ExecutorOutput:
         return ExecutorOutput(None, 0.0, True, self.params.acceptance_radius_m, self.current_seq, events)

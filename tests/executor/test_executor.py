@@ -144,7 +144,9 @@ def test_rtl_mode_drives_home_and_holds_there_and_resumes_on_start():
     ex.rtl()
     out = ex.update(2.0, (20.0, 5.0))
     assert ex.mode is Mode.RTL and out.target_en == (0.0, 0.0) and out.speed_limit_mps == 0.5 and not out.hold
-    assert ex.update(3.0, (0.5, 0.5)).hold
+    home = ex.update(3.0, (0.5, 0.5))
+    assert home.hold and [e.text for e in home.events] == ["RTL: reached home"]
+    assert ex.update(3.5, (1.5, 0.5)).hold and not ex.update(3.6, (1.5, 0.5)).events  # stays held, says it once
     ex.start()  # back to AUTO: the current item again
     assert ex.update(4.0, (0.5, 0.5)).target_en == (20.0, 20.0)
 
