@@ -197,3 +197,26 @@ def test_paper_four_sensor_setup_works():
     rover = SimRover(params, World(), HOME, seed=1)
     assert sorted(s.orientation for s in rover.rangefinders()) == [0, 2, 4, 6]
     assert math.isfinite(rover.attitude().yaw_rad)
+
+
+def test_frame_size_does_not_change_the_physics():
+    world = world_of(wall(3.0))
+    coarse, fine = SimRover(SitlParams(), world, HOME, 1), SimRover(SitlParams(), world, HOME, 1)
+    for rover in (coarse, fine):
+        rover.set_motor_pwm(1800, 1790)
+    events_coarse = coarse.step(4.0)
+    events_fine = drive_for(fine, 4.0, 0.004)
+    assert coarse.truth() == fine.truth()
+    assert events_coarse == events_fine and events_coarse
+
+
+def test_playground_world_fires_every_scheduled_fault():
+    from pathlib import Path
+
+    from sitl.world import load_world
+
+    world = load_world(Path(__file__).resolve().parents[2] / "missions" / "worlds" / "playground.geojson")
+    rover = SimRover(SitlParams(), world, world.home, seed=1)
+    events = rover.step(90.0)
+    faults = [(e.detail["name"], e.detail["active"]) for e in events if e.kind == "fault"]
+    assert sorted(faults) == sorted((f.name, active) for f in world.faults for active in (True, False))
