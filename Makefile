@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 # The main job. Until the daemon lands this is the emulator under a scripted drive.
-DEMO_CMD ?= $(BIN)/python -m sitl.demo
+DEMO_CMD ?= $(BIN)/rover-ctl sim missions/cmac_loop.waypoints --world missions/worlds/cmac_loop.geojson --lockstep --out runs/demo
 
 demo: $(STAMP)
 	$(DEMO_CMD)
