@@ -254,9 +254,24 @@ class Emulator:
         os.close(self.wake_w)
 
 
+VALUE_FLAGS_MAY_START_WITH_MINUS = ("--home", "--along")
+"""Flags whose value is often negative (southern/western coordinates), which argparse takes for an option."""
+
+
+def _join_negative_values(argv: list[str]) -> list[str]:
+    """``--home -35.3,149.1,584,0`` -> ``--home=-35.3,149.1,584,0``."""
+    out: list[str] = []
+    for token in argv:
+        if out and out[-1] in VALUE_FLAGS_MAY_START_WITH_MINUS and token.startswith("-"):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser().parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
         world = _world(args)
     except (UsageError, WorldError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)

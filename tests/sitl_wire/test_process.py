@@ -1,0 +1,157 @@
+"""rover-sitl as a process: endpoints (udp, tcp, pty, several at once), time modes, errors, shutdown."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from support import free_port
+from support.sitl import collect, lockstep_client, of_type, rover_sitl
+
+from sitl.main import main
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+pytestmark = pytest.mark.sitl
+
+
+def run_sitl(*flags: str, timeout_s: float = 20.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sitl", *flags], capture_output=True, text=True, timeout=timeout_s)
+
+
+def one_error_line(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 2, result
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rover-sitl: error: "), result.stderr
+    return lines[0]
+
+
+def main_error_line(capsys, *argv: str) -> str:
+    """rover-sitl's main() in this process (argument and world errors happen before any I/O)."""
+    result = subprocess.CompletedProcess(argv, main(list(argv)), "", "")
+    result.stdout, result.stderr = capsys.readouterr()
+    return one_error_line(result)
+
+
+@pytest.mark.parametrize(("flags", "needle"), [
+    (["--home", "91,0,0,0"], "91,0,0,0"),
+    (["--home", "1,2,3"], "LAT,LON,ALT,HEADING"),
+    (["--home", "-95,2,3,0"], "-95,2,3,0"),
+    (["--speedup", "0"], "positive"),
+    (["--speedup", "2", "--lockstep"], "not allowed with"),
+    (["--endpoint", "serial:/dev/null"], "unknown scheme"),
+    (["--endpoint", "tcpin:localhost"], "HOST:PORT"),
+    (["--param", "SIM_NOPE=1"], "SIM_NOPE"),
+    (["--param", "SIM_WHEEL_SLIP=3"], "outside"),
+    (["--scatter", "3"], "--along"),
+    (["--bogus"], "--bogus"),
+])
+def test_bad_flags_give_one_line_error(capsys, flags: list[str], needle: str) -> None:
+    assert needle in main_error_line(capsys, *flags, "--duration-s", "0")
+
+
+def test_bad_world_files_name_the_file(capsys, tmp_path) -> None:
+    assert "cannot read" in main_error_line(capsys, "--world", str(tmp_path / "absent.geojson"))
+    broken = tmp_path / "broken.geojson"
+    broken.write_text('{"type": "FeatureCollection", "features": [')
+    line = main_error_line(capsys, "--world", str(broken))
+    assert str(broken) in line and "JSON" in line
+    bad_feature = tmp_path / "bad.geojson"
+    bad_feature.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": {"type": "Point", "coordinates": [149.1, -35.3]}, "properties": {}}]}))
+    assert str(bad_feature) in main_error_line(capsys, "--world", str(bad_feature))
+
+
+def test_port_in_use_is_an_error() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        line = one_error_line(run_sitl("--endpoint", f"tcpin:127.0.0.1:{port}", "--duration-s", "0"))
+    assert f"127.0.0.1:{port}" in line and "in use" in line
+
+
+def test_scatter_writes_a_world_it_can_reload(tmp_path) -> None:
+    out = tmp_path / "scattered.geojson"
+    along = "-35.363261,149.165230;-35.362900,149.165230;-35.362900,149.165700"
+    result = run_sitl("--scatter", "4", "--along", along, "--seed", "3", "--write-world", str(out),
+                      "--endpoint", f"udpout:127.0.0.1:{free_port()}", "--speedup", "inf", "--duration-s", "1")
+    assert result.returncode == 0, result.stderr
+    assert len(json.loads(out.read_text())["features"]) == 4
+    result = run_sitl("--world", str(out), "--endpoint", f"udpout:127.0.0.1:{free_port()}", "--speedup", "inf", "--duration-s", "1")
+    assert result.returncode == 0 and "stopped at t=1.00 s" in result.stdout
+
+
+def test_udp_controller_with_a_tcp_watcher_and_garbage(udp_port: int, tcp_port: int) -> None:
+    endpoints = [f"udpin:127.0.0.1:{udp_port}", f"tcpin:127.0.0.1:{tcp_port}"]
+    with rover_sitl("--lockstep", endpoints=endpoints) as sitl:
+        watcher = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_port}", source_system=250)
+        watcher.write(b"\xfd\x09\x00\x00garbage that is not MAVLink\xfe\x05junk" * 20)
+        client = lockstep_client(sitl.url)  # udpout to the first endpoint: the controller
+        client.arm()
+        received = collect(client, 2.0, lambda t: (1700, 1500))
+        client.close()
+        seen = []
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and len([m for m in seen if m.get_type() == "HEARTBEAT"]) < 2:
+            msg = watcher.recv_match(blocking=True, timeout=1)
+            if msg is not None:
+                seen.append(msg)
+        watcher.close()
+    assert len(of_type(received, "HEARTBEAT")) == 2
+    assert {"HEARTBEAT", "ATTITUDE", "GPS_RAW_INT"} <= {m.get_type() for m in seen}  # the watcher saw telemetry
+    assert sitl.returncode == 0
+    bad = int(sitl.output[-1].split(", ")[1].split()[0])
+    assert bad > 0, sitl.output[-1]
+
+
+def test_serial_endpoint_through_a_pty() -> None:
+    with rover_sitl("--lockstep", "--pty") as sitl:
+        assert sitl.pty_device and os.path.exists(sitl.pty_device)
+        client = lockstep_client(sitl.pty_device)
+        client.arm()
+        received = collect(client, 1.0, lambda t: (1800, 1500))
+        client.close()
+    assert of_type(received, "SERVO_OUTPUT_RAW")[-1].servo1_raw == 1785
+    assert abs(len(of_type(received, "ATTITUDE")) - 50) <= 2  # 1 s at 50 Hz (+ the arming frames)
+
+
+def test_speedup_runs_free_and_sigterm_exits_cleanly(tmp_path, udp_port: int) -> None:
+    truth = tmp_path / "truth.jsonl"
+    with rover_sitl("--speedup", "20", "--truth-log", str(truth), endpoints=[f"udpin:127.0.0.1:{udp_port}"]) as sitl:
+        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{udp_port}", source_system=255)
+        conn.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        first = conn.recv_match(type="GPS_RAW_INT", blocking=True, timeout=5)
+        second = None
+        while second is None or second.time_usec < first.time_usec + 2_000_000:
+            second = conn.recv_match(type="GPS_RAW_INT", blocking=True, timeout=5)
+            assert second is not None
+        conn.close()
+        sitl.proc.send_signal(signal.SIGTERM)
+        sitl.proc.wait(5)
+    assert sitl.returncode == 0
+    records = [json.loads(line) for line in truth.read_text().splitlines()]  # complete lines: flushed
+    assert records[-1]["t_s"] >= 2.0
+
+
+def test_link_loss_fault_thins_telemetry_but_not_the_lockstep_marker() -> None:
+    with rover_sitl("--lockstep", "--param", "SIM_LINK_LOSS_PCT=50") as sitl:
+        client = lockstep_client(sitl.url)
+        received = collect(client, 4.0)
+        client.set_param("SIM_LINK_QUIET", 1)  # may itself be lost: resend until quiet
+        for _ in range(20):
+            quiet = collect(client, 0.2)
+            if not quiet:
+                break
+            client.set_param("SIM_LINK_QUIET", 1)
+        client.close()
+    attitude = len(of_type(received, "ATTITUDE"))
+    assert 60 < attitude < 140  # about half of 200
+    assert quiet == []  # nothing but markers
