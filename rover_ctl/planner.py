@@ -67,8 +67,12 @@ EN = tuple[float, float]
 NODE_OFFSET_M = 0.02
 """Graph vertices sit this much outside the inflated zones used to check edges (rounding margin)."""
 
+TANGENT_TOLERANCE = 1e-9
+"""Product of the neighbour sines below which a line still counts as tangent (rounding)."""
+
 UNBOUNDED_M = 1.0e6
 """Half-size of the square that stands for the plane when there is no inclusion fence."""
+
 
 class FenceError(ValueError):
     """Fence items that do not describe valid polygons/circles; the message names the item."""
@@ -215,10 +219,16 @@ def _tangent(at: np.ndarray, prev: np.ndarray, nxt: np.ndarray, other: np.ndarra
     cut the corner), so other edges are dropped before the costlier visibility test: the
     reduced visibility graph."""
     d = other - at
-    a, b = prev - at, nxt - at
-    side_prev = d[:, 0] * a[:, 1] - d[:, 1] * a[:, 0]
-    side_next = d[:, 0] * b[:, 1] - d[:, 1] * b[:, 0]
-    return side_prev * side_next >= 0
+    # Sines of the angles from the line to each neighbour; a query point on a ring edge makes one
+    # of them zero up to rounding, which must count as tangent.
+    return _sine(d, prev - at) * _sine(d, nxt - at) >= -TANGENT_TOLERANCE
+
+
+def _sine(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise sine of the angle from u to v (0 where either is zero)."""
+    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    norms = np.hypot(u[:, 0], u[:, 1]) * np.hypot(v[:, 0], v[:, 1])
+    return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
 
 
 class Planner:
@@ -235,36 +245,36 @@ class Planner:
         self.params = params
         self.fence = fence
         self.clearance_m = robot.footprint_width_m / 2.0 + params.clearance_margin_m
-        self._obstacles = [Polygon(p) for p in polygons] + [
-            _circle_polygon(c.center_en, c.radius_m, params.circle_segments, True) for c in circles
-        ]
+        self._obstacle_polygons = [Polygon(p) for p in polygons]
+        self._obstacle_circles = list(circles)
         self._blocked: list[tuple[float, Circle]] = []  # (time added, circle)
-        self._inclusions = [Polygon(p) for p in fence.inclusion_polygons] + [
-            _circle_polygon(c.center_en, c.radius_m, params.circle_segments, False) for c in fence.inclusion_circles
-        ]
-        self._exclusions = [Polygon(p) for p in fence.exclusion_polygons] + [
-            _circle_polygon(c.center_en, c.radius_m, params.circle_segments, True) for c in fence.exclusion_circles
-        ]
+        self._inclusion_polygons = [Polygon(p) for p in fence.inclusion_polygons]
+        self._exclusion_polygons = [Polygon(p) for p in fence.exclusion_polygons]
         self._rebuild()
 
     # -- geometry -------------------------------------------------------------------------------
 
     def _inflated(self, extra_m: float):
-        """Free space with the zones inflated by clearance + extra_m (None: no inclusion fence)."""
-        quad_segs = max(1, self.params.circle_segments // 4)
+        """The region inside the inclusion fences shrunk, and the union of the zones inflated, by
+        clearance + extra_m (region None: no inclusion fence)."""
+        n = self.params.circle_segments
+        quad_segs = max(1, n // 4)
         # Round joins are chords of the offset arc; dividing by cos(half the chord angle) keeps
         # every chord at least the clearance away.
-        chord = math.cos(math.pi / (4 * quad_segs))
-        grow = (self.clearance_m + extra_m) / chord
-        blocked_circles = [
-            _circle_polygon(c.center_en, c.radius_m + self.clearance_m + extra_m, self.params.circle_segments, True)
-            for _, c in self._blocked
+        margin = self.clearance_m + extra_m
+        grow = margin / math.cos(math.pi / (4 * quad_segs))
+        circles = self._obstacle_circles + list(self.fence.exclusion_circles) + [c for _, c in self._blocked]
+        zones = unary_union(
+            [z.buffer(grow, quad_segs=quad_segs) for z in self._exclusion_polygons + self._obstacle_polygons]
+            + [_circle_polygon(c.center_en, c.radius_m + margin, n, circumscribed=True) for c in circles]
+        )
+        shrunk = [p.buffer(-grow, quad_segs=quad_segs) for p in self._inclusion_polygons] + [
+            _circle_polygon(c.center_en, c.radius_m - margin, n, circumscribed=False) if c.radius_m > margin else Polygon()
+            for c in self.fence.inclusion_circles
         ]
-        zones = unary_union([z.buffer(grow, quad_segs=quad_segs) for z in self._exclusions + self._obstacles] + blocked_circles)
         region = None
-        for inclusion in self._inclusions:
-            shrunk = inclusion.buffer(-grow, quad_segs=quad_segs)
-            region = shrunk if region is None else region.intersection(shrunk)
+        for inside in shrunk:
+            region = inside if region is None else region.intersection(inside)
         return region, zones
 
     def _rebuild(self) -> None:
@@ -292,18 +302,28 @@ class Planner:
         return shapely.covers(self._free, lines)
 
     def _raw_violation(self, point_en: EN) -> str | None:
-        """Why a point is not allowed at all (no clearance involved), or None."""
-        p = Point(point_en)
-        e, n = point_en
-        if not all(inc.covers(p) for inc in self._inclusions):
-            return f"goal ({e:.1f}, {n:.1f}) m is outside the inclusion fence"
-        if any(exc.contains(p) for exc in self._exclusions):
-            return f"goal ({e:.1f}, {n:.1f}) m is inside a fence exclusion zone"
-        if any(obs.contains(p) for obs in self._obstacles):
-            return f"goal ({e:.1f}, {n:.1f}) m is inside a known obstacle"
-        if any(math.dist(point_en, c.center_en) < c.radius_m for _, c in self._blocked):
-            return f"goal ({e:.1f}, {n:.1f}) m is inside a blocked area"
+        """Why a goal is not allowed at all (no clearance involved), or None."""
+        where = f"goal ({point_en[0]:.1f}, {point_en[1]:.1f}) m"
+        if not self._inside_inclusions(point_en):
+            return f"{where} is outside the inclusion fence"
+        if self._in_any(point_en, self._exclusion_polygons, self.fence.exclusion_circles):
+            return f"{where} is inside a fence exclusion zone"
+        if self._in_any(point_en, self._obstacle_polygons, self._obstacle_circles):
+            return f"{where} is inside a known obstacle"
+        if self._in_any(point_en, [], [c for _, c in self._blocked]):
+            return f"{where} is inside a blocked area"
         return None
+
+    def _inside_inclusions(self, point_en: EN) -> bool:
+        p = Point(point_en)
+        return all(poly.covers(p) for poly in self._inclusion_polygons) and all(
+            math.dist(point_en, c.center_en) <= c.radius_m for c in self.fence.inclusion_circles
+        )
+
+    @staticmethod
+    def _in_any(point_en: EN, polygons: Sequence[Polygon], circles: Iterable[Circle]) -> bool:
+        p = Point(point_en)
+        return any(poly.contains(p) for poly in polygons) or any(math.dist(point_en, c.center_en) < c.radius_m for c in circles)
 
     def _to_free(self, point_en: EN) -> EN | None:
         """``point_en`` if it is in free space, else the nearest point of it (None: none at all)."""
@@ -318,8 +338,7 @@ class Planner:
 
     def is_inside_fence(self, point_en: EN) -> bool:
         """True unless ``point_en`` is outside an inclusion or inside an exclusion zone (no clearance)."""
-        p = Point(point_en)
-        return all(inc.covers(p) for inc in self._inclusions) and not any(exc.contains(p) for exc in self._exclusions)
+        return self._inside_inclusions(point_en) and not self._in_any(point_en, self._exclusion_polygons, self.fence.exclusion_circles)
 
     def plan_leg(self, start_en: EN, goal_en: EN) -> Path:
         """Shortest path from ``start_en`` to ``goal_en``; ``Path.error`` explains a failure."""
