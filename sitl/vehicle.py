@@ -131,7 +131,9 @@ class SimRover:
                                                          "active": self.faults.manual[name] != 0}))
 
     def _apply_fault_changes(self) -> None:
-        for fault, active in self.faults.update(self.time_s):
+        # Fault windows are resolved to the nearest substep: evaluate half a substep ahead so a
+        # start or end time that falls on this substep counts whatever its rounding.
+        for fault, active in self.faults.update(self.time_s + self.params.physics_dt_s / 2.0):
             self._pending.append(Event("fault", self.time_s, {"name": fault.name, "active": active, **fault.params}))
         self.drive.slip = self.faults.wheel_slip
 

@@ -220,3 +220,12 @@ def test_playground_world_fires_every_scheduled_fault():
     events = rover.step(90.0)
     faults = [(e.detail["name"], e.detail["active"]) for e in events if e.kind == "fault"]
     assert sorted(faults) == sorted((f.name, active) for f in world.faults for active in (True, False))
+
+
+def test_fault_windows_off_the_substep_grid_still_fire():
+    world = world_of(faults=[{"name": "gps_outage", "start_s": 0.0005, "duration_s": 0.0021},
+                             {"name": "link_quiet", "start_s": 0.1 + 0.2, "duration_s": 0.7 - 0.4}])
+    rover = SimRover(SitlParams(), world, HOME, seed=1)
+    events = [(e.detail["name"], e.detail["active"], round(e.time_s, 4)) for e in rover.step(1.0)]
+    assert events == [("gps_outage", True, 0.0), ("gps_outage", False, 0.003),
+                      ("link_quiet", True, 0.3), ("link_quiet", False, 0.6)]
