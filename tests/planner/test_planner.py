@@ -217,3 +217,16 @@ def test_reduced_visibility_graph_is_as_short_as_the_full_one():
                 full.add_edge("s", "g", weight=math.dist(start, goal))
             assert path.length_m == pytest.approx(nx.shortest_path_length(full, "s", "g", weight="weight"), rel=1e-4)
             full.remove_nodes_from(["s", "g"])
+
+
+def test_inclusion_circle_fence_is_exact_and_kept_with_clearance():
+    field_ = Circle((0.0, 0.0), 20.0)
+    wall = ((-2.0, -19.0), (2.0, -19.0), (2.0, 15.0), (-2.0, 15.0))  # leaves a gap only at the north rim
+    planner = Planner(PARAMS, ROBOT, Fence(inclusion_circles=(field_,), exclusion_polygons=(wall,)))
+    assert planner.is_inside_fence((0.0, 19.99)) and not planner.is_inside_fence((0.0, 20.01))
+    assert not planner.is_inside_fence((0.0, 0.0))
+    path = planner.plan_leg((-10.0, 0.0), (10.0, 0.0))
+    assert path.ok
+    assert Point(0, 0).buffer(20.0 - CLEARANCE_M + TOL_M, quad_segs=64).covers(LineString(path.points))
+    assert clearance_to(path, Polygon(wall)) >= CLEARANCE_M - TOL_M
+    assert max(n for _, n in path.points) > 15.0
