@@ -1,0 +1,67 @@
+"""``rover-ctl fuzzy eval|show`` end to end through the CLI entry point."""
+
+import csv
+import io
+
+import pytest
+
+from rover_ctl.cli import main
+
+HEADER = "target_distance,target_direction,obstacle_left,obstacle_front,obstacle_right,obstacle_back,label"
+ROWS = ["8.0912,58.865,9.4708,11.6025,25.0,5.5469,a", "2.3776,260.8843,3.323,25.0,20.0,16.9835,b"]
+
+
+def run(argv, capsys, stdin=None, monkeypatch=None):
+    if stdin is not None:
+        monkeypatch.setattr("sys.stdin", io.StringIO(stdin))
+    code = main(argv)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_eval_file_to_file_keeps_columns_and_appends_outputs(tmp_path, capsys):
+    source, target = tmp_path / "in.csv", tmp_path / "out.csv"
+    source.write_text("\n".join([HEADER, *ROWS]) + "\n")
+    code, out, err = run(["fuzzy", "eval", "--rulebase", "paper", "--input", str(source), "--output", str(target)], capsys)
+    assert (code, out, err) == (0, "", "")
+    rows = list(csv.DictReader(target.open()))
+    assert [r["label"] for r in rows] == ["a", "b"]
+    assert float(rows[0]["left_motor"]) == pytest.approx(98.5982819, abs=0.05)
+    assert float(rows[1]["right_motor"]) == pytest.approx(-1.59983265, abs=0.05)
+
+
+def test_eval_stdin_stdout_with_explain(capsys, monkeypatch):
+    code, out, _ = run(["fuzzy", "eval", "--rulebase", "paper", "--explain"], capsys, "\n".join([HEADER, ROWS[0]]), monkeypatch)
+    assert code == 0
+    row = next(csv.DictReader(io.StringIO(out)))
+    assert row["rules"].startswith("#449=0.555 #448=0.445")
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("target_distance,label\n1,a\n", "<stdin>: missing input column(s) target_direction"),
+        (HEADER + "\n1,2,3,x,5,6,a\n", "<stdin> line 2 column obstacle_front: not a number: 'x'"),
+        (HEADER + "\n1,2,3\n", "<stdin> line 2: 3 fields, the header has 7"),
+    ],
+)
+def test_eval_bad_input_is_one_line_exit_2(capsys, monkeypatch, text, message):
+    code, out, err = run(["fuzzy", "eval", "--rulebase", "paper"], capsys, text, monkeypatch)
+    assert code == 2 and out == ""
+    assert err == f"rover-ctl: error: {message}" + err.split(message, 1)[1]
+    assert err.count("\n") == 1
+
+
+def test_unknown_rulebase(capsys):
+    code, _, err = run(["fuzzy", "show", "nonesuch"], capsys)
+    assert code == 2 and "nonesuch: no such rule base file or shipped name" in err
+
+
+def test_show_prints_variables_rules_and_plots(tmp_path, capsys):
+    png = tmp_path / "sets.png"
+    code, out, _ = run(["fuzzy", "show", "paper", "--plot", str(png)], capsys)
+    assert code == 0
+    assert "input target_direction [deg] range 0..360, circular period 360" in out
+    assert "forward_fast     133.34 200 200 266.67" in out
+    assert "972 rules" in out and "warning: paper.toml: 1 input combination(s) have no rule for left_motor" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
