@@ -236,7 +236,7 @@ class MissionExecutor:
         elif item.command == CONDITION_DELAY:
             self._target = position_en
             self._phase = _Phase.WAIT
-            self._wait_until_s = now_s + max(item.param1, 0.0)
+            self._wait_until_s = now_s + max(_number(item.param1), 0.0)
         else:
             return self._do(seq, item, events)
         events.append(Event(EventKind.CURRENT, seq))
@@ -245,10 +245,11 @@ class MissionExecutor:
     def _do(self, seq: int, item: MissionItem, events: list[Event]) -> bool:
         """Execute a DO item or skip an unsupported one; True only for a DO_JUMP taken."""
         if item.command == DO_CHANGE_SPEED:
-            if item.param2 > 0:
-                self._mission_speed_mps = min(item.param2, self.max_speed_mps)
-                if item.param2 > self.max_speed_mps:
-                    events.append(_warning(f"Speed {item.param2:g} m/s clamped to {self.max_speed_mps:.2f}"))
+            speed = _number(item.param2)
+            if speed > 0:
+                self._mission_speed_mps = min(speed, self.max_speed_mps)
+                if speed > self.max_speed_mps:
+                    events.append(_warning(f"Speed {speed:g} m/s clamped to {self.max_speed_mps:.2f}"))
             return False
         if item.command == DO_JUMP:
             return self._jump(seq, item, events)
@@ -256,7 +257,7 @@ class MissionExecutor:
         return False
 
     def _jump(self, seq: int, item: MissionItem, events: list[Event]) -> bool:
-        target, repeat = int(item.param1), int(item.param2)
+        target, repeat = int(_number(item.param1)), int(_number(item.param2))
         if not 1 <= target <= len(self.items):
             events.append(_warning(f"Skipping DO_JUMP #{seq}: no item #{target}"))
             return False
@@ -280,13 +281,13 @@ class MissionExecutor:
     def _radius(self, item: MissionItem) -> float:
         if item.command == NAV_RETURN_TO_LAUNCH:
             return self.params.rtl_radius_m
-        if item.command == NAV_WAYPOINT and item.param2 > 0:
+        if item.command == NAV_WAYPOINT and _number(item.param2) > 0:
             return item.param2
         return self.params.acceptance_radius_m
 
     @staticmethod
     def _hold_time_s(item: MissionItem) -> float:
-        return max(item.param1, 0.0) if item.command in (NAV_WAYPOINT, NAV_LOITER_TIME) else 0.0
+        return max(_number(item.param1), 0.0) if item.command in (NAV_WAYPOINT, NAV_LOITER_TIME) else 0.0
 
     def _rtl_step(self, position_en: EN, events: list[Event]) -> ExecutorOutput:
         speed = self.params.rtl_speed_mps if self.params.rtl_speed_mps > 0 else self._mission_speed_mps
@@ -298,6 +299,11 @@ class MissionExecutor:
 
     def _holding(self, events: list[Event]) -> ExecutorOutput:
         return ExecutorOutput(None, 0.0, True, self.params.acceptance_radius_m, self.current_seq, events)
+
+
+def _number(value: float) -> float:
+    """A parameter as a number: NaN or infinite (unset in a .plan file, garbage) counts as 0."""
+    return value if math.isfinite(value) else 0.0
 
 
 def _warning(text: str) -> Event:

@@ -207,3 +207,16 @@ def test_idle_and_empty_missions_hold():
     empty = MissionExecutor([], to_enu, PARAMS, MAX_SPEED_MPS)
     assert empty.start()[0].severity is Severity.WARNING
     assert empty.update(0.0, (0.0, 0.0)).hold
+
+
+def test_nan_and_infinite_params_count_as_zero():
+    nan, inf = float("nan"), float("inf")
+    ex = executor(
+        MissionItem(16, FRAME_GLOBAL_RELATIVE_ALT, nan, nan, x=0.0, y=5.0),
+        do(178, 1, nan),
+        do(177, nan, inf),
+        do(112, inf),
+        wp(5, 5),
+    )
+    reached, _ = drive(ex)
+    assert reached == [1, 5] and ex.complete
