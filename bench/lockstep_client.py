@@ -16,9 +16,15 @@ reads a few bytes per system call, too slow for a controller at 20x real time).
 from __future__ import annotations
 
 import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -159,3 +165,31 @@ class LockstepClient:
 
     def close(self) -> None:
         self.conn.close()
+
+
+@contextmanager
+def sitl_process(*flags: str, start_timeout_s: float = 15.0) -> Iterator[str]:
+    """Run ``python -m sitl --lockstep *flags`` on a free loopback TCP port; yield the client's URL.
+
+    Returns once the emulator printed its ready line; stops it with SIGTERM on exit."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    argv = [sys.executable, "-m", "sitl", "--lockstep", "--endpoint", f"tcpin:127.0.0.1:{port}", *flags]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        ready = threading.Event()
+        threading.Thread(target=lambda: [ready.set() for line in proc.stdout if line.startswith("rover-sitl: ready")],
+                         daemon=True).start()
+        if not ready.wait(start_timeout_s):
+            proc.kill()
+            raise LockstepError(f"rover-sitl did not start: exit {proc.wait()}, {proc.stderr.read().strip()}")
+        yield f"tcp:127.0.0.1:{port}"
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(5.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
