@@ -344,6 +344,8 @@ class Planner:
         """Shortest path from ``start_en`` to ``goal_en``; ``Path.error`` explains a failure."""
         start_en = (float(start_en[0]), float(start_en[1]))
         goal_en = (float(goal_en[0]), float(goal_en[1]))
+        if not all(map(math.isfinite, start_en + goal_en)):
+            return Path((start_en,), error=f"cannot plan from {start_en} to {goal_en}: not a finite position")
         reason = self._raw_violation(goal_en)
         if reason is not None:
             return Path((start_en,), error=reason)

@@ -230,3 +230,9 @@ def test_inclusion_circle_fence_is_exact_and_kept_with_clearance():
     assert Point(0, 0).buffer(20.0 - CLEARANCE_M + TOL_M, quad_segs=64).covers(LineString(path.points))
     assert clearance_to(path, Polygon(wall)) >= CLEARANCE_M - TOL_M
     assert max(n for _, n in path.points) > 15.0
+
+
+def test_non_finite_positions_give_an_error():
+    planner = Planner(PARAMS, ROBOT, Fence(exclusion_circles=(Circle((5, 0), 1),)))
+    assert "not a finite position" in planner.plan_leg((math.nan, 0.0), (10.0, 0.0)).error
+    assert "not a finite position" in planner.plan_leg((0.0, 0.0), (math.inf, 0.0)).error
