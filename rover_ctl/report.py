@@ -286,11 +286,15 @@ def write_report(run_dir: str | Path, world_path: str | Path | None = None, time
     metrics = compute_metrics(run, timed_out=timed_out)
     if plots:
         metrics["plots"] = [p.name for p in make_plots(run, Path(world_path) if world_path else None)]
-    (run.dir / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json_default) + "\n")
+    metrics = {key: _plain(value) for key, value in metrics.items()}
+    (run.dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     return metrics
 
 
-def _json_default(value: Any) -> Any:
+def _plain(value: Any) -> Any:
+    """JSON-safe: numpy scalars to Python, NaN (a figure that could not be measured) to null."""
     if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {value!r}")
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

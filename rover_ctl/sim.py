@@ -24,6 +24,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,8 +51,16 @@ ARM_RETRY_S = 1.0
 """Wall seconds between arming attempts while the daemon waits for its first GPS fix."""
 STOP_TIMEOUT_S = 10.0
 """Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
+GCS_HEARTBEAT_PERIOD_S = 1.0
 MODE_AUTO = 10
 MODE_HOLD = 4
+
+
+def _copy_lines(stream: Any, path: Path) -> None:
+    with open(path, "a") as handle:
+        for line in stream:
+            handle.write(line)
+            handle.flush()
 
 
 class SimError(RuntimeError):
@@ -97,6 +106,8 @@ class Progress:
     armed: bool = False
     complete: bool = False
     last_text: str = ""
+    texts: list[str] = field(default_factory=list)
+    """Every STATUSTEXT from the daemon, in order."""
     position_en: tuple[float, float] | None = None
 
     @property
@@ -135,6 +146,9 @@ class SimRun:
         self._logs: list[Any] = []
         self._last_rx_wall = time.monotonic()
         self._param_ack: dict[str, float] = {}
+        self.send_heartbeats = True
+        """Our GCS heartbeat at 1 Hz, as a ground station sends it (tests pause it for the GCS failsafe)."""
+        self._next_heartbeat_wall = 0.0
 
     # ---- processes -------------------------------------------------------------------------
 
@@ -202,8 +216,10 @@ class SimRun:
             if not line:
                 break
             lines.append(line.strip())
-            if " ready " in line or line.startswith("rover-sitl: ready"):
+            if line.startswith("rover-sitl: ready"):
                 (self.out / "sitl.out").write_text("\n".join(lines) + "\n")
+                # Keep draining its stdout so the emulator never blocks on a full pipe.
+                threading.Thread(target=_copy_lines, args=(self.sitl.stdout, self.out / "sitl.out"), daemon=True).start()
                 return
         self.sitl.poll()
         log_text = (self.out / "sitl.log").read_text() if (self.out / "sitl.log").exists() else ""
@@ -227,10 +243,6 @@ class SimRun:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-        if self.sitl is not None and self.sitl.stdout:
-            rest = self.sitl.stdout.read()
-            with open(self.out / "sitl.out", "a") as handle:
-                handle.write(rest)
         for conn in (self.gcs, self.watcher):
             if conn is not None:
                 conn.close()
@@ -288,8 +300,12 @@ class SimRun:
         if result != mav.MAV_RESULT_ACCEPTED:
             raise SimError(f"MISSION_START refused (result {result}): {self.progress.last_text}")
 
-    def sitl_param(self, name: str, value: float, timeout_s: float = 5.0) -> None:
-        """PARAM_SET on the emulator (fault injection), confirmed by its PARAM_VALUE."""
+    def sitl_param(self, name: str, value: float, timeout_s: float = 5.0, confirm: bool = True) -> None:
+        """PARAM_SET on the emulator (fault injection), confirmed by its PARAM_VALUE unless
+        ``confirm`` is false (a quiet link sends no confirmation)."""
+        if not confirm:
+            self.watcher.mav.param_set_send(1, 1, name.encode(), float(value), mav.MAV_PARAM_TYPE_REAL32)
+            return
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             self.watcher.mav.param_set_send(1, 1, name.encode(), float(value), mav.MAV_PARAM_TYPE_REAL32)
@@ -304,6 +320,9 @@ class SimRun:
 
     def poll(self, wait_s: float = 0.05) -> None:
         """Read what both connections have (waiting up to ``wait_s`` for the GCS link)."""
+        if self.send_heartbeats and time.monotonic() >= self._next_heartbeat_wall:
+            self._next_heartbeat_wall = time.monotonic() + GCS_HEARTBEAT_PERIOD_S
+            self.gcs.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         msg = self.gcs.conn.recv_match(blocking=True, timeout=wait_s)
         while msg is not None:
             self._observe(msg)
@@ -339,6 +358,7 @@ class SimRun:
             p.reached.add(msg.seq)
         elif kind == "STATUSTEXT":
             p.last_text = msg.text
+            p.texts.append(msg.text)
             if msg.text.startswith("Mission complete"):
                 p.complete = True
 

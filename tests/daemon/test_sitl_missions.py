@@ -1,0 +1,98 @@
+"""Missions end to end: emulator and daemon as separate processes, lockstep, the test as the GCS."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from pymavlink import mavutil
+
+from rover_ctl.geo import LocalFrame
+from rover_ctl.report import read_jsonl
+from rover_ctl.sim import MODE_HOLD, SimOptions, SimRun, simulate
+
+ROOT = Path(__file__).resolve().parents[2]
+JUMP = ROOT / "missions" / "cmac_jump.waypoints"
+HOME = (-35.363261, 149.165230, 584.0)
+MODE_RTL = 11
+
+pytestmark = pytest.mark.sitl
+
+
+def world_with_circle(path: Path, east_m: float, north_m: float, radius_m: float) -> Path:
+    frame = LocalFrame(*HOME)
+    lat, lon = frame.to_geodetic(east_m, north_m)
+    world = {
+        "type": "FeatureCollection",
+        "home": [HOME[1], HOME[0], HOME[2], 0.0],
+        "features": [{"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat]},
+                      "properties": {"id": "drum", "radius_m": radius_m}}],
+    }  # fmt: skip
+    path.write_text(json.dumps(world))
+    return path
+
+
+def truth_states(out: Path) -> list[dict]:
+    return [r for r in read_jsonl(out / "truth.jsonl") if r["type"] == "state"]
+
+
+def test_jump_mission_completes_around_an_obstacle(tmp_path):
+    """cmac_jump: WP1, WP2, DO_JUMP back to WP1 once, WP4 home; a drum sits on the WP1-WP2 leg."""
+    world = world_with_circle(tmp_path / "drum.geojson", 7.5, 15.0, 0.5)
+    out = tmp_path / "run"
+    metrics = simulate(SimOptions(mission=JUMP, out=out, world=world, timeout_s=150.0), plots=False)
+
+    assert metrics["success"], metrics
+    assert metrics["collisions"] == 0
+    assert metrics["waypoints_reached"] == metrics["waypoints_total"] == 3
+    events = read_jsonl(out / "events.jsonl")
+    assert [e["seq"] for e in events if e["type"] == "reached"] == [1, 2, 1, 2, 4]  # the jump, taken once
+    # The drum was on the way (the rover passed near it) and the rover went around it.
+    frame = LocalFrame(*HOME)
+    clearance = min(
+        math.dist(frame.to_enu(s["lat_deg"], s["lon_deg"]), (7.5, 15.0)) for s in truth_states(out)
+    )
+    assert 0.5 < clearance < 3.0
+    # Ended at home (the last waypoint), within the acceptance radius.
+    last = truth_states(out)[-1]
+    assert math.dist(frame.to_enu(last["lat_deg"], last["lon_deg"]), (0.0, 0.0)) < 2.5
+
+    # Both links' telemetry logs read back with pymavlink.
+    log = mavutil.mavlink_connection(str(out / "vehicle.tlog"))
+    kinds = set()
+    while (msg := log.recv_match()) is not None:
+        kinds.add(msg.get_type())
+    assert {"HEARTBEAT", "WHEEL_DISTANCE", "DISTANCE_SENSOR", "GPS_RAW_INT", "RC_CHANNELS_OVERRIDE", "TIMESYNC"} <= kinds
+    gcs = mavutil.mavlink_connection(str(out / "gcs.tlog"))
+    reached = [m.seq for m in iter(lambda: gcs.recv_match(type="MISSION_ITEM_REACHED"), None)]
+    assert reached == [1, 2, 1, 2, 4]
+    assert metrics["loop_latency_p99_ms"] is not None and metrics["path_length_m"] > 50
+
+
+def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
+    out = tmp_path / "run"
+    with SimRun(SimOptions(mission=JUMP, out=out, timeout_s=120.0)) as run:
+        run.arm()
+        run.start_mission()
+        assert run.wait_for(lambda p: 1 in p.reached, sim_timeout_s=60.0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False  # get up to speed on the next leg
+        assert run.set_mode(MODE_HOLD) == mavutil.mavlink.MAV_RESULT_ACCEPTED
+        assert run.wait_for(lambda p: p.mode == MODE_HOLD, sim_timeout_s=5.0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
+        assert run.set_mode(MODE_RTL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
+        home = LocalFrame(*HOME)
+        assert run.wait_for(lambda p: p.position_en is not None and math.dist(p.position_en, (0, 0)) < 2.0, sim_timeout_s=60.0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # settles at home
+
+    events = read_jsonl(out / "events.jsonl")
+    hold_s = next(e["t_s"] for e in events if e["type"] == "mode" and e["name"] == "HOLD")
+    states = truth_states(out)
+    before = [s["speed_mps"] for s in states if hold_s - 0.5 <= s["t_s"] <= hold_s]
+    after = [s["speed_mps"] for s in states if hold_s + 0.5 <= s["t_s"] <= hold_s + 2.0]
+    assert max(before) > 0.5  # it was driving
+    assert max(abs(v) for v in after) < 0.05  # and stood still from 0.5 s of sim time after HOLD
+    last = states[-1]
+    assert math.dist(home.to_enu(last["lat_deg"], last["lon_deg"]), (0.0, 0.0)) < 2.5
+    assert abs(last["speed_mps"]) < 0.05
