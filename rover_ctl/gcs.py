@@ -313,7 +313,7 @@ class GcsLink:
             return
         sender = (msg.get_srcSystem(), msg.get_srcComponent())
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self._on_command(msg, sender, now_s)
+            self._on_command(msg, sender)
         elif kind == "SET_MODE":
             self.handlers.set_mode(msg.custom_mode)
         elif kind == "REQUEST_DATA_STREAM":
@@ -364,7 +364,7 @@ class GcsLink:
 
     # ---------------------------------------------------------------- commands
 
-    def _on_command(self, msg, sender: tuple[int, int], now_s: float) -> None:
+    def _on_command(self, msg, sender: tuple[int, int]) -> None:
         command = msg.command
         h = self.handlers
         followup = None
@@ -377,11 +377,8 @@ class GcsLink:
         elif command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             result = h.return_to_launch()
         elif command == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
-            replies = self.service.handle(
-                mav.MAVLink_mission_set_current_message(self.params.system_id, self.params.component_id, int(msg.param1)),
-                now_s,
-            )
-            ok = bool(replies) and replies[0].get_type() == "MISSION_CURRENT"
+            replies = self.service.request_current(int(msg.param1))
+            ok = replies[0].get_type() == "MISSION_CURRENT"
             result = mav.MAV_RESULT_ACCEPTED if ok else mav.MAV_RESULT_DENIED
             followup = replies[0] if ok else None
         elif command in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):

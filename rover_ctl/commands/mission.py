@@ -97,13 +97,14 @@ def _client(args: argparse.Namespace):
 
 def _run(args: argparse.Namespace, action):
     """Run ``action(client, progress)`` with a progress bar, turning protocol failures into UserError."""
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from rover_ctl.mission.client import TYPE_NAMES, MissionClientError
 
     with _client(args) as client, Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-        disable=args.quiet, transient=True, console=None,
+        disable=args.quiet, transient=True, console=Console(stderr=True),
     ) as bar:  # fmt: skip
         tasks: dict[int, int] = {}
 

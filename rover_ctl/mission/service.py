@@ -232,7 +232,7 @@ class MissionService:
         if kind == "MISSION_CLEAR_ALL":
             return self._on_clear(msg, sender)
         if kind == "MISSION_SET_CURRENT":
-            return self._on_set_current(msg.seq, sender)
+            return self.request_current(msg.seq)
         return []  # MISSION_ACK: the end of a download, nothing to do
 
     def tick(self, now_s: float) -> list:
@@ -349,7 +349,9 @@ class MissionService:
         self._upload = None
         return [self._ack(sender, self._store(cleared(self.mission, msg.mission_type), msg.mission_type), msg.mission_type)]
 
-    def _on_set_current(self, seq: int, sender: Sender) -> list:
+    def request_current(self, seq: int) -> list:
+        """A ground station asks to continue at wire seq ``seq`` (MISSION_SET_CURRENT or
+        MAV_CMD_DO_SET_MISSION_CURRENT): MISSION_CURRENT if the executor agreed, else a warning."""
         if not 0 < seq < self.count(MissionType.MISSION) or not self._set_current(seq):
             text = f"Mission seq {seq} cannot be made current (mission has {len(self.mission.items)} items)"
             return [mav.MAVLink_statustext_message(mav.MAV_SEVERITY_WARNING, text.encode()[:50], 0, 0)]

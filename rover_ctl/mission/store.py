@@ -23,6 +23,13 @@ FORMAT = "rover_ctl-mission-store"
 VERSION = 1
 
 
+NUMBER_FIELDS = ("command", "frame", "param1", "param2", "param3", "param4", "x", "y", "z")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 class StoreError(ValueError):
     """The store file is unreadable or not a mission store; the message names it."""
 
@@ -51,9 +58,13 @@ def from_json(data: Any, where: str) -> Mission:
         out = []
         for index, row in enumerate(rows):
             try:
-                out.append(MissionItem(**row))
+                item = MissionItem(**row)
             except TypeError as exc:
                 raise StoreError(f"{where}: {key}[{index}]: {exc}") from None
+            bad = [name for name in NUMBER_FIELDS if not _is_number(getattr(item, name))]
+            if bad or not isinstance(item.autocontinue, bool):
+                raise StoreError(f"{where}: {key}[{index}]: {', '.join(bad) or 'autocontinue'} has the wrong type")
+            out.append(item)
         return out
 
     home = data.get("home")
@@ -61,6 +72,8 @@ def from_json(data: Any, where: str) -> Mission:
         home = Home(**home) if home is not None else None
     except TypeError as exc:
         raise StoreError(f"{where}: home: {exc}") from None
+    if home is not None and not all(_is_number(v) for v in (home.lat_deg, home.lon_deg, home.alt_m)):
+        raise StoreError(f"{where}: home: coordinates must be numbers")
     return Mission(items=items("items"), home=home, fence=items("fence"), rally=items("rally"))
 
 
