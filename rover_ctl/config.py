@@ -190,6 +190,11 @@ class EstimatorParams:
     max_lag_s: float = 0.5
     """Readings older than the filter's time by up to this are fused with lag compensation;
     older ones are dropped."""
+    clock_restart_s: float = 3.0
+    """A reading this much older than the filter's time means the vehicle rebooted: start over."""
+    gps_max_lead_s: float = 1.0
+    """A fix stamped this far ahead of the wheels and compass is on another clock (ArduPilot
+    stamps GPS_RAW_INT with UNIX time once it has GPS time): ignored."""
     gps_timeout_s: float = 1.0
     """gps_ok is false when no fix was fused for longer than this."""
     health_max_position_sigma_m: float = 5.0
