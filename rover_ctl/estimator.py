@@ -42,7 +42,10 @@ its covariance grows and a real drift is soon accepted again; a disagreement sus
 ``glitch_reset_s`` resets the position to the GPS (EKF3's GLITCH_RAD rule), since then it is more
 likely the filter that is wrong.
 
-Time: each reading carries vehicle time. A reading newer than the filter's time predicts the
+Time: each reading carries vehicle time; ATTITUDE and WHEEL_DISTANCE drive the filter's clock
+(GPS does not: a fix stamped more than ``gps_max_lead_s`` ahead of it, such as a UNIX-epoch
+stamp, is ignored; a reading more than ``clock_restart_s`` behind it means the vehicle rebooted,
+and the filter starts over). A reading newer than the filter's time predicts the
 filter forward to it and is then fused. A reading up to ``max_lag_s`` older than the filter's
 time (streams interleave: GPS is stamped before the wheel reading of the same frame arrives) is
 fused at the filter's time, shifted by the motion over the lag (GPS by ``v * lag`` along the
@@ -162,6 +165,10 @@ class PoseEstimator:
         self.frame = frame
         self.params = params
         self.track_m = track_m
+        self._clear()
+
+    def _clear(self) -> None:
+        """Forget everything: the state before the first reading."""
         self._kf = _RoverEkf(dim_x=_DIM, dim_z=2)
         self._time_s = -math.inf
         self._initialised = False
@@ -211,6 +218,7 @@ class PoseEstimator:
     # ------------------------------------------------------------------------------- readings
     def on_wheels(self, r: WheelDistance) -> None:
         """Cumulative wheel distances: the speed measurement is their mean rate since the last."""
+        self._check_clock(r.time_s)
         last = self._last_wheel
         if last is not None and r.time_s <= last.time_s:
             return
@@ -233,7 +241,10 @@ class PoseEstimator:
 
     def on_attitude(self, r: Attitude) -> None:
         """Gyro rate for the prediction from now on, and the compass heading as a measurement."""
-        if r.time_s <= self._last_attitude_s or not (math.isfinite(r.yaw_rad) and math.isfinite(r.yaw_rate_radps)):
+        if not (math.isfinite(r.yaw_rad) and math.isfinite(r.yaw_rate_radps)):
+            return
+        self._check_clock(r.time_s)
+        if r.time_s <= self._last_attitude_s:
             return
         self._last_attitude_s = r.time_s
         heading_rad = compass_to_enu_rad(r.yaw_rad)
@@ -256,7 +267,12 @@ class PoseEstimator:
 
     def on_gps(self, r: GpsFix) -> GpsVerdict:
         """Fuse, reject (gate) or reset to a fix; see the module docstring."""
-        if not r.has_fix or r.time_s <= self._last_gps_s:
+        if not r.has_fix:
+            return GpsVerdict.IGNORED
+        self._check_clock(r.time_s)
+        if r.time_s <= self._last_gps_s:
+            return GpsVerdict.IGNORED
+        if math.isfinite(self._time_s) and r.time_s - self._time_s > self.params.gps_max_lead_s:
             return GpsVerdict.IGNORED
         self._last_gps_s = r.time_s
         east_m, north_m = self.frame.to_enu(r.lat_deg, r.lon_deg)
@@ -264,7 +280,6 @@ class PoseEstimator:
         sigma_m = max(eph_m, self.params.gps_min_sigma_m)
         if not self._initialised:
             self._pending_fix = (east_m, north_m, sigma_m)
-            self._time_s = max(self._time_s, r.time_s)
             self._gps_fused_s = r.time_s
             self._try_initialise()
             return GpsVerdict.RESET
@@ -291,6 +306,12 @@ class PoseEstimator:
         return GpsVerdict.RESET
 
     # -------------------------------------------------------------------------------- internals
+    def _check_clock(self, time_s: float) -> None:
+        """A reading far older than the filter means the vehicle's clock restarted (a reboot):
+        start over rather than drop every reading from now on."""
+        if self._time_s - time_s > self.params.clock_restart_s:
+            self._clear()
+
     def _fuse_course(self, r: GpsFix, lag_s: float) -> None:
         """GPS course over ground as a heading measurement, when moving fast enough to mean it."""
         p = self.params

@@ -289,3 +289,21 @@ def test_compass_offset_is_learnt_from_the_gps_course():
     run.readings = [dataclasses.replace(r, course_deg=math.nan) if isinstance(r, GpsFix) else r for r in run.readings]
     _, blind, _ = run_filter(run)
     assert math.degrees(blind.heading_rms_rad(since_s=5.0)) > 2.0
+
+
+def test_gps_on_another_clock_is_ignored_and_a_reboot_starts_over():
+    run = simulate(20.0, lambda t: 1.0, lambda t: 0.0, seed=31)
+    estimator = new_estimator()
+    feed(estimator, run.readings)
+    pose = estimator.pose()
+    lat, lon = CMAC.to_geodetic(pose.east_m, pose.north_m)
+    epoch_s = 1.7e9  # ArduPilot stamps GPS_RAW_INT with UNIX time once the receiver has it
+    assert estimator.on_gps(GpsFix(epoch_s, lat, lon, 584.0, 3, 1.0, 1.0, 90.0, 10)) is GpsVerdict.IGNORED
+    assert estimator.pose().time_s == 20.0
+    # the vehicle reboots: its clock starts again at zero
+    estimator.on_attitude(Attitude(0.1, 0.0, 0.0))
+    assert not estimator.initialised
+    lat, lon = CMAC.to_geodetic(5.0, 5.0)
+    assert estimator.on_gps(GpsFix(0.2, lat, lon, 584.0, 3, 1.0, 0.0, math.nan, 10)) is GpsVerdict.RESET
+    pose = estimator.pose()
+    assert estimator.initialised and (pose.east_m, pose.north_m) == pytest.approx((5.0, 5.0), abs=1e-6)
