@@ -112,6 +112,7 @@ class Daemon:
         self.last_fix_s: float | None = None
         self.commanded_speed_mps = 0.0
         self._silent_neutral_wall_s = 0.0
+        self._marker_wall_s = 0.0
         self.ranges: dict[int, RangeReading] = {}
         self.last_gps: Any = None
         self.truth: Truth | None = None
@@ -226,6 +227,7 @@ class Daemon:
                 self._on_item(item)
         if marker is not None:
             self.lockstep = True
+            self._marker_wall_s = time.monotonic()
             self._maybe_step(marker.time_s)
             link.answer_marker(marker)
         elif not self.lockstep and items:
@@ -425,7 +427,8 @@ class Daemon:
     def control_step(self, t_s: float, dt_s: float) -> None:
         row: dict[str, Any] = dict.fromkeys(CSV_COLUMNS, "")
         pose = self.estimator.pose() if self.estimator and self.estimator.initialised else None
-        decision = self._failsafe(t_s, pose, vehicle_age_s=0.0)
+        last = self.link.last_rx_vehicle_s
+        decision = self._failsafe(t_s, pose, vehicle_age_s=0.0 if last is None else max(0.0, t_s - last))
         row.update(t_s=t_s, mode=self.mode, armed=int(self._armed()), failsafe="+".join(decision.reasons))
         if pose is not None:
             row.update(est_east_m=pose.east_m, est_north_m=pose.north_m, est_heading_rad=pose.heading_rad,
@@ -490,11 +493,13 @@ class Daemon:
         return decision
 
     def _check_silence(self) -> None:
-        """Vehicle link silent (wall clock): run the failsafe on the wall clock and send neutral."""
+        """Nothing at all from the vehicle (not even lockstep markers, which would drive the
+        control step and its failsafe in vehicle time): run the failsafe on the wall clock and
+        send neutral."""
         link = self.link
         if link.last_rx_wall_s is None:
             return
-        age_s = time.monotonic() - link.last_rx_wall_s
+        age_s = time.monotonic() - max(link.last_rx_wall_s, self._marker_wall_s)
         if age_s <= self.config.failsafe.vehicle_timeout_s:
             return
         pose = self.estimator.pose() if self.estimator and self.estimator.initialised else None

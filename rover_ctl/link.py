@@ -181,6 +181,9 @@ class VehicleLink:
         self.target_component = 1
         self.vehicle: VehicleStatus | None = None
         self.last_rx_wall_s: float | None = None
+        """Wall time of the last message from the vehicle (lockstep markers excluded)."""
+        self.last_rx_vehicle_s: float | None = None
+        """Vehicle time at the last message from the vehicle (lockstep markers excluded)."""
         self.vehicle_time_s = 0.0
         """Latest vehicle timestamp seen (sensor clock)."""
         self.frames_received = 0
@@ -225,7 +228,15 @@ class VehicleLink:
         if msg.get_srcSystem() == self.params.source_system:
             return None  # our own frames echoed by a broadcast medium
         self.frames_received += 1
+        if kind == "TIMESYNC":
+            # Lockstep markers keep coming from an emulator whose vehicle side went quiet: they
+            # advance time but are not a sign of life of the vehicle.
+            if msg.tc1 == 0:
+                self._advance(msg.ts1 / 1e9, alive=False)
+                return FrameMarker(time_s=msg.ts1 / 1e9, ts1_ns=msg.ts1)
+            return None
         self.last_rx_wall_s = self._wall()
+        self.last_rx_vehicle_s = self.vehicle_time_s
         if kind == "HEARTBEAT":
             if msg.type == mavlink.MAV_TYPE_GCS:
                 return None
@@ -252,11 +263,6 @@ class VehicleLink:
         if kind == "DISTANCE_SENSOR":
             self._advance(msg.time_boot_ms / 1000.0)
             return decode_range(msg, msg.time_boot_ms / 1000.0)
-        if kind == "TIMESYNC":
-            if msg.tc1 == 0:
-                self._advance(msg.ts1 / 1e9)
-                return FrameMarker(time_s=msg.ts1 / 1e9, ts1_ns=msg.ts1)
-            return None
         if kind == "SIMSTATE":
             return Truth(self.vehicle_time_s, msg.lat / 1e7, msg.lng / 1e7, msg.yaw)
         if kind == "SERVO_OUTPUT_RAW":
@@ -267,9 +273,11 @@ class VehicleLink:
             return self._on_ack(msg)
         return None
 
-    def _advance(self, time_s: float) -> None:
+    def _advance(self, time_s: float, alive: bool = True) -> None:
         if time_s > self.vehicle_time_s:
             self.vehicle_time_s = time_s
+        if alive:
+            self.last_rx_vehicle_s = self.vehicle_time_s
 
     # ---- sending ---------------------------------------------------------------------------
 
