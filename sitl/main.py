@@ -155,19 +155,21 @@ class Emulator:
         self.stop = True
 
     # ---- link ----------------------------------------------------------------------------
-    def _lost(self, endpoint: Endpoint) -> bool:
-        """Whether a controller-link message is lost to the SIM_LINK_* faults (never TIMESYNC)."""
+    def _lost(self, endpoint: Endpoint, outgoing: bool) -> bool:
+        """Whether a controller-link message is lost to the SIM_LINK_* faults. SIM_LINK_LOSS_PCT drops
+        both ways, SIM_LINK_QUIET silences the vehicle only (so a PARAM_SET can end it); the
+        lockstep marker and its answer are never lost (callers skip TIMESYNC)."""
         if endpoint is not self.controller:
             return False
         faults = self.rover.faults
-        if faults.link_quiet:
+        if outgoing and faults.link_quiet:
             return True
         return faults.link_loss_pct > 0 and self.link_rng.random() * 100.0 < faults.link_loss_pct
 
     def broadcast(self, msgs: list) -> None:
         for endpoint in self.endpoints:
             for msg in msgs:
-                if not self._lost(endpoint):
+                if not self._lost(endpoint, outgoing=True):
                     endpoint.send(msg)
 
     def send_marker(self) -> None:
@@ -198,10 +200,11 @@ class Emulator:
                 if msg.get_type() == "TIMESYNC" and endpoint is self.controller and self.marker.is_answer(msg):
                     answered = True
                     continue
-                if msg.get_type() != "TIMESYNC" and self._lost(endpoint):
+                if msg.get_type() != "TIMESYNC" and self._lost(endpoint, outgoing=False):
                     continue
                 for reply in self.vehicle.handle(msg, t_s):
-                    endpoint.reply(peer, reply)
+                    if not self._lost(endpoint, outgoing=True):
+                        endpoint.reply(peer, reply)
             if self.lockstep and endpoint is self.controller and len(endpoint.peers) > peers_before:
                 self.send_marker()  # a controller that just connected gets the marker at once
         return answered
@@ -312,8 +315,8 @@ def main(argv: list[str] | None = None) -> int:
     emulator.install_signals()
     for endpoint in endpoints:
         if isinstance(endpoint, PtyEndpoint):
-            print(f"PTY {endpoint.device}")
-        print(f"{PROG}: {'connected' if endpoint.kind in ('tcp', 'udpout') else 'listening'} {endpoint.url}")
+            print(f"PTY {endpoint.device}", flush=True)
+        print(f"{PROG}: {'connected' if endpoint.kind in ('tcp', 'udpout') else 'listening'} {endpoint.url}", flush=True)
     mode = "lockstep" if args.lockstep else ("free running" if math.isinf(args.speedup) else f"{args.speedup:g}x real time")
     print(f"{PROG}: ready ({mode}, frame {emulator.clock.frame_s:g} s, seed {args.seed})", flush=True)
     try:
