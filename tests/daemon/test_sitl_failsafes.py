@@ -70,3 +70,47 @@ def test_failsafes_trigger_and_clear(tmp_path):
     fs, steer, thr = header.index("failsafe"), header.index("steering_us"), header.index("throttle_us")
     quiet = [r for r in rows if "vehicle link" in r[fs]]
     assert quiet and all(r[steer] == "1500" and r[thr] == "1500" for r in quiet)
+
+
+BOULDER = ROOT / "missions" / "boulder_fence.plan"
+BOULDER_WORLD = ROOT / "missions" / "worlds" / "boulder_fence.geojson"
+
+
+def test_fenced_mission_avoids_the_exclusion_and_a_glitch_breaches_the_fence(tmp_path):
+    from shapely.geometry import Point, Polygon
+
+    from rover_ctl.geo import LocalFrame
+    from rover_ctl.mission.files import load_mission
+
+    out = tmp_path / "run"
+    mission = load_mission(BOULDER).mission
+    frame = LocalFrame(mission.home.lat_deg, mission.home.lon_deg)
+    fence = mission.fence
+    exclusion = Polygon([frame.to_enu(i.x, i.y) for i in fence if i.command == 5002])
+    with SimRun(SimOptions(mission=BOULDER, out=out, world=BOULDER_WORLD, timeout_s=200.0, config_overrides=["failsafe.recovery_s=1.0"])) as run:
+        run.arm()
+        run.start_mission()
+        assert run.wait_for(lambda p: 2 in p.reached or 3 in p.reached, sim_timeout_s=120.0)  # past the exclusion
+        # A 40 m GPS jump west: gated first, then believed (the filter resets): outside the fence.
+        run.sitl_param("SIM_GPS_GLITCH_Y", -40.0)
+        assert said(run, "FS fence breach: hold", sim_timeout_s=20.0)
+        collisions = run.progress.collisions
+
+    states = [r for r in read_jsonl(out / "truth.jsonl") if r["type"] == "state"]
+    driven = [Point(frame.to_enu(s["lat_deg"], s["lon_deg"])) for s in states]
+    assert min(exclusion.distance(p) for p in driven) > 0.2  # never entered the exclusion zone
+    assert collisions == 0
+
+
+def test_unhealthy_estimator_holds(tmp_path):
+    """An estimator that never meets the health limit (set impossibly tight) keeps the rover still."""
+    out = tmp_path / "run"
+    options = SimOptions(mission=ROOT / "missions" / "cmac_jump.waypoints", out=out, timeout_s=60.0,
+                         config_overrides=["estimator.health_max_position_sigma_m=0.001"])  # fmt: skip
+    with SimRun(options) as run:
+        run.arm()
+        run.start_mission()
+        assert said(run, "FS estimator: unhealthy, hold")
+        assert run.wait_for(lambda p: False, sim_timeout_s=4.0) is False
+    states = [r for r in read_jsonl(out / "truth.jsonl") if r["type"] == "state"]
+    assert max(abs(s["speed_mps"]) for s in states) < 0.05
