@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import select
+import socket
 import threading
 import time
 
@@ -56,10 +57,12 @@ class LinkThread:
         try:
             self.link = GcsLink(self.url, **self.kwargs)
             self._ready.set()
-            sock = self.link.conn.port
+            conn = self.link.conn
             while not self._stop.is_set():
                 self.link.poll(time.monotonic())
-                select.select([sock], [], [], POLL_WAIT_S)  # wakes on a datagram, or for timeouts
+                # udp: the socket; tcpin: the accepted connection, or the listening socket before it
+                sock = conn.port if isinstance(getattr(conn, "port", None), socket.socket) else conn.fd
+                select.select([sock], [], [], POLL_WAIT_S)  # wakes on data, or for timeouts
         except BaseException as exc:  # surfaced by __enter__/__exit__
             self._error = exc
             self._ready.set()

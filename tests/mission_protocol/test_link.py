@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 from mission_protocol.helpers import HOME, MAVPROXY, MAVSDK, LinkThread, expect, gcs
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -123,7 +125,17 @@ def test_upload_download_clear_and_mission_changed(url, udp_port, mission):
         assert c.download().same_as(Mission(home=mission.home))
 
 
-def test_mission_start_current_and_reached(url, udp_port, mission):
+@pytest.mark.parametrize("link_side, client_side", [("udpout", "udpin"), ("tcpin", "tcp")])
+def test_other_connection_kinds(link_side, client_side, udp_port, tcp_port, mission):
+    port = tcp_port if link_side == "tcpin" else udp_port
+    with LinkThread(f"{link_side}:127.0.0.1:{port}", params=FAST) as lt, MissionClient(
+        f"{client_side}:127.0.0.1:{port}", FAST
+    ) as c:
+        c.upload(mission)
+        assert lt.link.service.mission.same_as(mission) and c.download().same_as(mission)
+
+
+def test_mission_start_and_set_current(url, udp_port, mission):
     handlers = DefaultHandlers()
     with LinkThread(url, params=FAST, handlers=handlers) as lt, client(udp_port) as c:
         c.connect()
@@ -200,13 +212,34 @@ def test_request_data_stream_over_the_wire(url, udp_port):
         assert rates[mav.MAVLINK_MSG_ID_SYS_STATUS] == pytest.approx(0.2)
 
 
-def test_long_statustext_is_chunked(url, udp_port):
+def connected(url: str, udp_port: int):
+    """An unthreaded GcsLink that has heard a ground station (so it knows where to send)."""
     link = GcsLink(url, FAST)
+    conn = gcs(udp_port)
+    conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    end = time.monotonic() + 3.0
+    while link.conn.recv_msg() is None:
+        assert time.monotonic() < end, "the link never heard the ground station"
+    return link, conn
+
+
+def test_mission_current_and_item_reached_as_the_executor_reports(url, udp_port, mission):
+    link, conn = connected(url, udp_port)
     try:
-        conn = gcs(udp_port)
-        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        while link.conn.recv_msg() is None:  # learn the ground station's address
-            pass
+        link.service.mission = mission
+        link.send_mission_current(3)
+        current = expect(conn, "MISSION_CURRENT")
+        assert (current.seq, current.total, current.mission_state) == (3, len(mission.items), mav.MISSION_STATE_ACTIVE)
+        link.send_mission_item_reached(3)
+        assert expect(conn, "MISSION_ITEM_REACHED").seq == 3
+        assert link.service.current_seq == 3
+    finally:
+        link.close()
+
+
+def test_long_statustext_is_chunked(url, udp_port):
+    link, conn = connected(url, udp_port)
+    try:
         text = "obstacle ahead " * 7
         link.send_statustext(text, mav.MAV_SEVERITY_WARNING)
         chunks = [expect(conn, "STATUSTEXT") for _ in range(3)]
