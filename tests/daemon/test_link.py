@@ -1,0 +1,166 @@
+"""The vehicle link against a scripted vehicle on a real UDP socket (same thread, own sockets)."""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from rover_ctl.config import LinkParams  # noqa: E402
+from rover_ctl.link import CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus, decode_range  # noqa: E402
+from rover_ctl.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
+from support import free_port  # noqa: E402
+
+mav = mavutil.mavlink
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def receive(conn, kind: str, timeout_s: float = 2.0):
+    msg = conn.recv_match(type=kind, blocking=True, timeout=timeout_s)
+    assert msg is not None, f"no {kind} within {timeout_s} s"
+    return msg
+
+
+def drain(link: VehicleLink, want: type, timeout_s: float = 2.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        link.wait_readable(0.05)
+        for item in link.poll():
+            if isinstance(item, want):
+                return item
+    raise AssertionError(f"no {want.__name__} within {timeout_s} s")
+
+
+@pytest.fixture
+def pair():
+    port = free_port(socket.SOCK_DGRAM)
+    clock = FakeClock()
+    link = VehicleLink(f"udpin:127.0.0.1:{port}", LinkParams(), command_timeout_s=0.5, command_retries=2, wall=clock)
+    vehicle = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega")
+    vehicle.mav.heartbeat_send(mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, mav.MAV_MODE_FLAG_SAFETY_ARMED, 0, 0)
+    status = link.wait_vehicle(2.0)
+    assert isinstance(status, VehicleStatus) and status.armed and status.custom_mode == 0
+    # The link heartbeats as a GCS from SYSID_MYGCS, once a period (udpin: now that it knows the peer).
+    clock.t += LinkParams().heartbeat_period_s
+    link.tick()
+    hb = receive(vehicle, "HEARTBEAT")
+    assert hb.type == mav.MAV_TYPE_GCS and hb.get_srcSystem() == 255
+    yield link, vehicle, clock
+    link.close()
+    vehicle.close()
+
+
+@pytest.mark.parametrize(
+    "current_cm, max_cm, expected",
+    [(150, 400, 1.5), (0, 400, math.inf), (65535, 400, math.inf), (401, 400, math.inf), (20, 400, 0.2)],
+)
+def test_range_decoding(current_cm, max_cm, expected):
+    msg = mav.MAVLink_distance_sensor_message(1000, 20, max_cm, current_cm, 0, 3, 6, 0)
+    reading = decode_range(msg, 1.0)
+    assert reading.range_m == expected and reading.orientation == 6 and reading.max_range_m == 4.0
+
+
+def test_sensor_messages_decode_to_readings(pair):
+    link, vehicle, _ = pair
+    vehicle.mav.attitude_send(2500, 0, 0, 1.2, 0, 0, -0.3)
+    vehicle.mav.wheel_distance_send(2_520_000, 2, [1.5, 1.75] + [0.0] * 14)
+    vehicle.mav.gps_raw_int_send(2_540_000, 3, -353632610, 1491652300, 584000, 65535, 65535, 120, 9000, 10)
+    vehicle.mav.distance_sensor_send(2560, 20, 400, 0, 0, 0, 0, 0)
+    got = {}
+    deadline = time.monotonic() + 2.0
+    while len(got) < 4 and time.monotonic() < deadline:
+        link.wait_readable(0.05)
+        for item in link.poll():
+            got[type(item)] = item
+    att = got[Attitude]
+    assert (att.time_s, att.yaw_rad, att.yaw_rate_radps) == (2.5, pytest.approx(1.2), pytest.approx(-0.3))
+    assert got[WheelDistance] == WheelDistance(2.52, 1.5, 1.75)
+    fix = got[GpsFix]
+    assert fix.has_fix and fix.lat_deg == pytest.approx(-35.363261) and math.isnan(fix.eph_m) and fix.speed_mps == 1.2
+    assert got[RangeReading].range_m == math.inf  # 0 cm: nothing seen yet
+    assert link.vehicle_time_s == pytest.approx(2.56)
+
+
+def test_garbage_is_counted_and_skipped(pair):
+    link, vehicle, _ = pair
+    vehicle.write(b"\xfd\x09\x00\x00\x07\x01\x01\x00\x00\x00garbage-bytes-that-are-no-frame")
+    vehicle.mav.attitude_send(3000, 0, 0, 0.5, 0, 0, 0.0)
+    assert drain(link, Attitude).time_s == 3.0
+    assert link.garbage_frames >= 1
+
+
+def test_command_is_retried_until_acknowledged(pair):
+    link, vehicle, clock = pair
+    results: list[CommandResult] = []
+    link.arm_async(True, on_result=results.append)
+    first = receive(vehicle, "COMMAND_LONG")
+    assert (first.command, first.param1, first.confirmation) == (mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0)
+    clock.t += 0.6  # no ACK within command_timeout_s: sent again with the next confirmation number
+    link.tick()
+    second = receive(vehicle, "COMMAND_LONG")
+    assert second.confirmation == 1
+    vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED)
+    assert drain(link, CommandResult).accepted
+    assert results and results[0].accepted
+
+
+def test_unanswered_command_fails_after_the_retries(pair):
+    link, vehicle, clock = pair
+    results: list[CommandResult] = []
+    link.set_mode_async(0, on_result=results.append)
+    for _ in range(3):
+        receive(vehicle, "COMMAND_LONG")
+        clock.t += 0.6
+        link.tick()
+    assert results == [CommandResult(mav.MAV_CMD_DO_SET_MODE, -1)]
+
+
+def test_overrides_and_release(pair):
+    link, vehicle, _ = pair
+    link.send_override(1600, 1700)
+    msg = receive(vehicle, "RC_CHANNELS_OVERRIDE")
+    assert (msg.chan1_raw, msg.chan2_raw, msg.chan3_raw, msg.chan4_raw) == (1600, 0, 1700, 0)
+    assert msg.get_srcSystem() == 255 and msg.target_system == 1
+    link.release_override()
+    msg = receive(vehicle, "RC_CHANNELS_OVERRIDE")
+    assert (msg.chan1_raw, msg.chan3_raw) == (0, 0)
+
+
+def test_lockstep_marker_is_a_frame_and_is_answered(pair):
+    link, vehicle, _ = pair
+    vehicle.mav.wheel_distance_send(4_980_000, 2, [0.0] * 16)
+    vehicle.mav.timesync_send(0, 5_000_000_000)
+    vehicle.mav.attitude_send(5020, 0, 0, 0.5, 0, 0, 0.0)  # next frame: must not be in this poll
+    seen = []
+    deadline = time.monotonic() + 2.0
+    while not any(isinstance(i, FrameMarker) for i in seen) and time.monotonic() < deadline:
+        link.wait_readable(0.05)
+        seen += link.poll()
+    assert isinstance(seen[-1], FrameMarker) and seen[-1].time_s == 5.0
+    assert not any(isinstance(i, Attitude) for i in seen)
+    link.answer_marker(seen[-1])
+    answer = receive(vehicle, "TIMESYNC")
+    assert answer.ts1 == 5_000_000_000 and answer.tc1 != 0
+    assert link.last_rx_vehicle_s == pytest.approx(4.98)  # markers are no sign of life
+    assert drain(link, Attitude).time_s == 5.02
+
+
+def test_no_vehicle_is_a_clear_error():
+    port = free_port(socket.SOCK_DGRAM)
+    link = VehicleLink(f"udpin:127.0.0.1:{port}", LinkParams())
+    with pytest.raises(LinkError, match="no vehicle heartbeat within 0.2 s"):
+        link.wait_vehicle(0.2)
+    link.close()
