@@ -259,10 +259,6 @@ class GcsLink:
         self.store_error: str | None = None
         """Why the stored mission could not be loaded (the file was moved aside), if it could not."""
         self._changed_type = 0
-        mission = self._load_store()
-        self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
-        if mission.items or mission.fence or mission.rally:
-            self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
         self.rates = _Rates({msg_id: self._default_interval(msg_id) for msg_id in _TELEMETRY})
         self.last_gcs_heartbeat_s: float | None = None
         """When a ground station's HEARTBEAT last arrived (for the GCS failsafe)."""
@@ -276,6 +272,10 @@ class GcsLink:
             autoreconnect=True,
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        mission = self._load_store()
+        self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
+        if mission.items or mission.fence or mission.rally:
+            self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
 
     def close(self) -> None:
         self.conn.close()

@@ -176,9 +176,9 @@ class MissionService:
     """Vehicle side of the mission protocol (see the module docstring).
 
     ``commit(mission, mission_type)`` is called with the complete new mission before an upload or
-    clear of ``mission_type`` (255 for all) is acknowledged (raise to refuse it); ``set_current(seq) -> bool`` asks the executor to jump to
-    wire seq ``seq``. ``system_id``/``component_id`` are ours: messages addressed to another
-    system or component are ignored.
+    clear of ``mission_type`` (255 for all) is acknowledged (raise to refuse it);
+    ``set_current(seq) -> bool`` asks the executor to jump to wire seq ``seq``. Messages addressed
+    to another system or component than ``params.system_id``/``component_id`` are ignored.
     """
 
     HANDLED = frozenset(

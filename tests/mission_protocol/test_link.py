@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import random
 import time
 
 import pytest
@@ -110,6 +111,16 @@ def test_params_list_read_and_set_reach_the_config(url, udp_port):
         assert expect(conn, "PARAM_VALUE", param_id="SYSID_THISMAV").param_value == 1.0
         conn.mav.param_request_read_send(1, 1, b"WP_SPEED", -1)
         assert expect(conn, "PARAM_VALUE", param_id="WP_SPEED").param_value == pytest.approx(config.executor.cruise_speed_mps)
+
+
+def test_garbage_on_the_link_is_survived(url, udp_port, mission):
+    rng = random.Random(7)
+    with LinkThread(url, params=FAST) as lt, client(udp_port) as c:
+        c.connect()
+        for size in (1, 7, 40, 280, 1000):
+            c.conn.write(bytes([0xFD]) + rng.randbytes(size))  # a MAVLink 2 start byte, then noise
+        c.upload(mission)
+        assert lt.link.service.mission.same_as(mission)
 
 
 def test_upload_download_clear_and_mission_changed(url, udp_port, mission):
