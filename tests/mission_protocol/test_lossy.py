@@ -9,7 +9,6 @@ import threading
 import time
 from dataclasses import replace
 
-import pytest
 from mission_protocol.helpers import MAVPROXY, LinkThread, expect, gcs, sample_mission
 from pymavlink.dialects.v20 import ardupilotmega as mav
 from support import free_port
