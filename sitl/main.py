@@ -82,6 +82,16 @@ def _positive(text: str) -> float:
     return value
 
 
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value >= 0 or math.isinf(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
+
+
 def _param(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     known = [*PARAM_NAMES, *FAULT_PARAMS]
@@ -110,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     timing.add_argument("--lockstep", action="store_true", help="advance a frame only when the controller answers its TIMESYNC marker")
     parser.add_argument("--frame-s", type=_positive, default=DEFAULT_FRAME_S, metavar="S", help=f"frame length in sim seconds (default {DEFAULT_FRAME_S})")
     parser.add_argument("--truth-log", type=Path, metavar="FILE", help="write ground truth as JSON lines")
-    parser.add_argument("--duration-s", type=float, metavar="S", help="stop after S sim seconds")
+    parser.add_argument("--duration-s", type=_non_negative, metavar="S", help="stop after S sim seconds")
     parser.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE",
                         help="set a parameter at start (SYSID_MYGCS, RC_OVERRIDE_TIME, ARMING_CHECK, SIM_*)")
     return parser
