@@ -153,7 +153,7 @@ def test_ten_second_outage_is_bridged_with_growing_covariance():
 
 def test_nees_within_95_percent_bounds():
     """Average NEES over runs at each sampled time against its chi-square 95 % interval."""
-    runs, dims = 12, 3
+    runs, dims = 20, 3
     sample_s = np.arange(5.0, 30.0, 1.0)
     nees = np.zeros((runs, len(sample_s)))
     columns = {round(s / 0.02): j for j, s in enumerate(sample_s)}
