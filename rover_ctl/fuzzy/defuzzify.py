@@ -27,13 +27,16 @@ ROWS_PER_SAMPLED_CHUNK = 512
 
 
 def area_centre(mu: np.ndarray, output: Variable, resolution: int) -> np.ndarray:
+    # A_k = 0.5 mu (bottom + core + (1 - mu) slopes) = mu (alpha - beta mu), expanded once
     points = np.array([s.points for s in output.sets])
     a, b, c, d = points.T
-    peaks = (b + c) / 2.0
-    areas = 0.5 * mu * ((d - a) + (c - b) + (1.0 - mu) * ((b - a) + (d - c)))
+    slopes = (b - a) + (d - c)
+    alpha, beta = 0.5 * ((d - a) + (c - b) + slopes), 0.5 * slopes
+    areas = mu * (alpha - beta * mu)
     total = areas.sum(axis=-1)
+    moment = areas @ ((b + c) / 2.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(total > 0.0, (areas * peaks).sum(axis=-1) / total, np.nan)
+        return np.where(total > 0.0, moment / total, np.nan)
 
 
 def _sampled(mu: np.ndarray, output: Variable, resolution: int, reduce: Callable) -> np.ndarray:

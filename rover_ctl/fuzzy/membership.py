@@ -36,12 +36,13 @@ class FuzzySet:
         return (b + c) / 2.0
 
     def membership(self, x: np.ndarray) -> np.ndarray:
-        """mu(x) for an array (no wrapping: that is the variable's job)."""
+        """mu(x) for an array (no wrapping: that is the variable's job); NaN gives 0."""
         a, b, c, d = self.points
         x = np.asarray(x, dtype=np.float64)
         rising = (x - a) / (b - a) if b > a else np.where(x >= a, 1.0, 0.0)
         falling = (d - x) / (d - c) if d > c else np.where(x <= d, 1.0, 0.0)
-        return np.clip(np.minimum(rising, falling), 0.0, 1.0)
+        # fmin/fmax drop NaN in favour of the number: a NaN input ends at 0
+        return np.fmin(np.fmax(np.fmin(rising, falling), 0.0), 1.0)
 
     def membership_one(self, x: float) -> float:
         """mu(x) for one float, without numpy (the control loop's path)."""
@@ -82,14 +83,25 @@ class Variable:
     def memberships(self, x: np.ndarray) -> np.ndarray:
         """Membership of every set, shape ``x.shape + (len(sets),)``; NaN inputs fire nothing."""
         x = np.asarray(x, dtype=np.float64)
+        return np.moveaxis(self.membership_rows(x.ravel()).reshape((len(self.sets),) + x.shape), 0, -1)
+
+    def membership_rows(self, x: np.ndarray) -> np.ndarray:
+        """Membership of every set for a 1-D array, shape ``(len(sets), len(x))``."""
+        rows = np.empty((len(self.sets), x.size))
         if self.period is None:
-            columns = [s.membership(x) for s in self.sets]
-        else:
-            wrapped = np.mod(x, self.period)
-            shifts = (-self.period, 0.0, self.period)
-            columns = [np.maximum.reduce([s.membership(wrapped + k) for k in shifts]) for s in self.sets]
-        mu = np.stack(columns, axis=-1)
-        return np.nan_to_num(mu, nan=0.0)
+            for k, fuzzy_set in enumerate(self.sets):
+                rows[k] = fuzzy_set.membership(x)
+            return rows
+        wrapped = np.mod(x, self.period)
+        for k, fuzzy_set in enumerate(self.sets):
+            a, _, _, d = fuzzy_set.points
+            rows[k] = fuzzy_set.membership(wrapped)
+            # only a set reaching past 0 or the period needs the shifted copies
+            if a < 0.0:
+                np.fmax(rows[k], fuzzy_set.membership(wrapped - self.period), out=rows[k])
+            if d > self.period:
+                np.fmax(rows[k], fuzzy_set.membership(wrapped + self.period), out=rows[k])
+        return rows
 
     def memberships_one(self, x: float) -> list[float]:
         """Membership of every set for one float (pure Python)."""
@@ -103,17 +115,49 @@ class Variable:
         low, high = wrapped - self.period, wrapped + self.period
         return [max(s.membership_one(low), s.membership_one(wrapped), s.membership_one(high)) for s in self.sets]
 
-    def max_active(self) -> int:
-        """Most sets that are non-zero at one point of the universe (exact for piecewise-linear sets).
-
-        Checked at every breakpoint and between neighbouring breakpoints, wrapped for a circular
-        variable; the compiled evaluator enumerates only that many sets per input.
-        """
+    def _probes(self) -> np.ndarray:
+        """Every breakpoint, the middle between neighbouring ones and a point beyond each end
+        (wrapped too for a circular variable): piecewise-linear sets are linear between them, so
+        which sets are non-zero anywhere is decided at these points."""
         points = sorted({p for s in self.sets for p in s.points if math.isfinite(p)} | {self.low, self.high})
         probes = list(points)
         probes += [(p + q) / 2.0 for p, q in zip(points, points[1:])]
         probes += [points[0] - 1.0, points[-1] + 1.0]
         if self.period is not None:
             probes += [p % self.period for p in probes]
-        mu = self.memberships(np.array(probes))
-        return int((mu > 0.0).sum(axis=1).max())
+        return np.array(probes)
+
+    def max_active(self) -> int:
+        """Most sets that are non-zero at one point of the universe (exact for piecewise-linear sets);
+        the compiled evaluator enumerates only that many sets per input."""
+        return int((self.memberships(self._probes()) > 0.0).sum(axis=1).max())
+
+    def chain_peaks(self) -> np.ndarray | None:
+        """The sets' peaks if the variable is a chain, else None.
+
+        A chain lists its sets in order of strictly increasing peaks (within one period for a
+        circular variable), and at any x only the pair ``(j, j + 1)`` of sets whose peaks bracket
+        x can be non-zero (``(n - 1, 0)`` across the wrap of a circular variable; the end pair
+        beyond the outer peaks of a linear one). The batch evaluator then needs only the pair's
+        lower index per input (``pair_index``) instead of sorting memberships.
+        """
+        peaks = np.array([s.peak for s in self.sets])
+        if len(peaks) < 2 or np.any(np.diff(peaks) <= 0.0):
+            return None
+        if self.period is not None and (peaks[0] < 0.0 or peaks[-1] >= self.period):
+            return None
+        probes = self._probes()
+        lower = self.pair_index(probes, peaks)
+        upper = (lower + 1) % len(peaks)
+        outside = self.memberships(probes) > 0.0
+        rows = np.arange(len(probes))
+        outside[rows, lower] = False
+        outside[rows, upper] = False
+        return None if outside.any() else peaks
+
+    def pair_index(self, x: np.ndarray, peaks: np.ndarray) -> np.ndarray:
+        """Lower index of the pair of neighbouring sets that may be non-zero at each x (chains)."""
+        n = len(peaks)
+        if self.period is None:
+            return np.clip(np.searchsorted(peaks, x, side="right") - 1, 0, n - 2)
+        return (np.searchsorted(peaks, np.mod(x, self.period), side="right") - 1) % n

@@ -32,7 +32,7 @@ import numpy as np
 from rover_ctl.fuzzy.defuzzify import DEFUZZIFIERS
 from rover_ctl.fuzzy.membership import Variable
 
-ROWS_PER_CHUNK = 4096
+ROWS_PER_CHUNK = 32768
 """Rows evaluated at once in batch: small enough for the ~2 kB of temporaries per row (paper's
 base) to stay in the CPU cache."""
 
@@ -75,6 +75,7 @@ class RuleBase:
                 f"{self.source}: unknown defuzzifier {self.defuzzifier!r} (known: {', '.join(DEFUZZIFIERS)})"
             )
         self._defuzz = DEFUZZIFIERS[self.defuzzifier]
+        self._and = np.minimum if self.and_method == "min" else np.multiply
         self._sizes = [len(v.sets) for v in self.inputs]
         # Row-major strides: cell = sum(set_index_i * stride_i).
         self._strides = [int(np.prod(self._sizes[i + 1 :], dtype=np.int64)) for i in range(len(self.inputs))]
@@ -123,11 +124,45 @@ class RuleBase:
         self._n_sets_out = [len(v.sets) for v in self.outputs]
         # Consequent per cell with "no rule" sent to a sink column past the output's sets.
         self._slot_tables = [np.where(t < 0, n, t).astype(np.intp) for t, n in zip(self._table, self._n_sets_out)]
+        self._chain_peaks = [v.chain_peaks() for v in self.inputs]
+        self._chained = all(p is not None for p in self._chain_peaks)
+        if self._chained:
+            self._compile_blocks()
         points = [np.array([s.points for s in v.sets]) for v in self.outputs]
         # Paper defuzzifier terms per output set: bottom + core, slopes, peak (pure-Python path).
         self._area_terms = [
             [(float(d - a + c - b), float((b - a) + (d - c)), float((b + c) / 2.0)) for a, b, c, d in p] for p in points
         ]
+
+    def _compile_blocks(self) -> None:
+        """For chain inputs: consequent slot per (corner, block), the batch evaluator's table.
+
+        A block is one choice of neighbouring-set pair per input; a corner picks the lower or the
+        upper set of each pair (bit i of the corner number, the first input most significant).
+        """
+        pairs = [len(v.sets) if v.period is not None else len(v.sets) - 1 for v in self.inputs]
+        self._block_strides = [int(np.prod(pairs[i + 1 :], dtype=np.int64)) for i in range(len(pairs))]
+        m = len(self.inputs)
+        blocks = np.arange(int(np.prod(pairs, dtype=np.int64)))
+        corners = np.arange(2**m)
+        cell = np.zeros((blocks.size, corners.size), dtype=np.intp)
+        for i, variable in enumerate(self.inputs):
+            lower = (blocks // self._block_strides[i]) % pairs[i]
+            bit = (corners >> (m - 1 - i)) & 1
+            cell += ((lower[:, None] + bit[None, :]) % len(variable.sets)) * self._strides[i]
+        # Per output and block: the corners sorted by the set they conclude, where each set's run
+        # starts, and which sets those are (corners concluding nothing are left out).
+        self._block_plan = []
+        for table in self._table:
+            consequent = table[cell]
+            plan = []
+            for row in consequent:
+                concluding = np.flatnonzero(row >= 0)
+                ordered = concluding[np.argsort(row[concluding], kind="stable")]
+                sets, starts = np.unique(row[ordered], return_index=True)
+                plan.append((ordered, starts, sets))
+            self._block_plan.append(plan)
+        self._n_blocks = blocks.size
 
     # ----- structure -------------------------------------------------------------------------
     @property
@@ -174,6 +209,8 @@ class RuleBase:
 
         Arrays are laid out (combinations, rows) so that every numpy loop runs along the rows.
         """
+        if self._chained:
+            return self._set_strengths_chained(columns)
         rows = columns[0].size
         row_index = np.arange(rows)
         strength = np.ones((1, rows), dtype=np.float32)
@@ -191,10 +228,7 @@ class RuleBase:
                 index, mu = np.array(picked_index), np.array(picked_mu)
             else:
                 index = np.broadcast_to(np.arange(mu.shape[0])[:, None], mu.shape)
-            if self.and_method == "min":
-                strength = np.minimum(strength[:, None, :], mu[None, :, :]).reshape(-1, rows)
-            else:
-                strength = (strength[:, None, :] * mu[None, :, :]).reshape(-1, rows)
+            strength = self._and(strength[:, None, :], mu[None, :, :]).reshape(-1, rows)
             cell = (cell[:, None, :] + (index * stride)[None, :, :]).reshape(-1, rows)
         result = []
         for table, n_sets in zip(self._slot_tables, self._n_sets_out):
@@ -203,6 +237,37 @@ class RuleBase:
             aggregate = np.zeros(rows * (n_sets + 1), dtype=np.float32)
             np.maximum.at(aggregate, slots.ravel(), strength.ravel())
             result.append(aggregate.reshape(rows, n_sets + 1)[:, :n_sets].astype(np.float64))
+        return result
+
+    def _set_strengths_chained(self, columns: list[np.ndarray]) -> list[np.ndarray]:
+        """``set_strengths`` for chain inputs: rows sorted by block, then per block a fixed
+        corner -> set map, so each set's strength is a max over a fixed run of corners."""
+        rows = columns[0].size
+        lowers = [v.pair_index(x, p) for v, x, p in zip(self.inputs, columns, self._chain_peaks)]
+        block = np.zeros(rows, dtype=np.intp)
+        for lower, stride in zip(lowers, self._block_strides):
+            block += lower * stride
+        order = np.argsort(block, kind="stable")
+        bounds = np.searchsorted(block[order], np.arange(self._n_blocks + 1))
+        row_index = np.arange(rows)
+        strength = np.ones((1, rows), dtype=np.float32)
+        for variable, x, lower, peaks in zip(self.inputs, columns, lowers, self._chain_peaks):
+            x, lower = x[order], lower[order]
+            mu = variable.membership_rows(x).astype(np.float32).ravel()  # sets x rows, flattened
+            upper = (lower + 1) % len(peaks)
+            pair = np.stack((mu[lower * rows + row_index], mu[upper * rows + row_index]))
+            strength = self._and(strength[:, None, :], pair[None, :, :]).reshape(-1, rows)
+        result = []
+        for plan, n_sets in zip(self._block_plan, self._n_sets_out):
+            aggregate = np.zeros((n_sets, rows), dtype=np.float32)  # in block order
+            for b in np.flatnonzero(bounds[1:] > bounds[:-1]):
+                corners, starts, sets = plan[b]
+                if corners.size:
+                    begin, end = bounds[b], bounds[b + 1]
+                    aggregate[sets, begin:end] = np.maximum.reduceat(strength[corners, begin:end], starts, axis=0)
+            unsorted = np.empty((rows, n_sets))
+            unsorted[order] = aggregate.T
+            result.append(unsorted)
         return result
 
     # ----- single (control loop) ---------------------------------------------------------------
