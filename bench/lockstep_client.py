@@ -115,13 +115,13 @@ class LockstepClient:
 
     def command(self, command: int, *params: float) -> int:
         """Send a COMMAND_LONG and step frames until its COMMAND_ACK; return the MAV_RESULT."""
-        carried: list = []  # messages of the frames stepped here, handed to the caller's next frame
-        if self._pending is not None:
-            t_ns, carried = self._pending
-            self._pending = None
-            self.answer(t_ns)
+        # Wait for a frame first: the link is then up (a tcpin client has accepted the emulator).
+        t_ns, carried = self._pending if self._pending is not None else self.next_frame()
+        self._pending = None
         values = list(params) + [0.0] * (7 - len(params))
         self.conn.mav.command_long_send(1, 1, command, 0, *values)
+        self.answer(t_ns)
+        carried = list(carried)  # messages of the frames stepped here, handed to the caller's next frame
         deadline = time.monotonic() + self.timeout_s
         while time.monotonic() < deadline:
             t_ns, msgs = self.next_frame()

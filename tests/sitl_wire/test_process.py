@@ -155,3 +155,18 @@ def test_link_loss_fault_thins_telemetry_but_not_the_lockstep_marker() -> None:
     attitude = len(of_type(received, "ATTITUDE"))
     assert 60 < attitude < 140  # about half of 200
     assert quiet == []  # nothing but markers
+
+
+def test_tcp_endpoint_connects_out_to_a_listening_controller(tcp_port: int) -> None:
+    client = lockstep_client(f"tcpin:127.0.0.1:{tcp_port}")  # the controller listens, the emulator dials
+    with rover_sitl("--lockstep", endpoints=[f"tcp:127.0.0.1:{tcp_port}"]) as sitl:
+        assert f"rover-sitl: connected tcp:127.0.0.1:{tcp_port}" in sitl.output
+        client.arm()
+        received = collect(client, 1.0, lambda t: (1500, 2000))
+        client.close()
+    assert of_type(received, "SERVO_OUTPUT_RAW")[-1].servo1_raw == 2000  # pivot right
+    assert of_type(received, "SERVO_OUTPUT_RAW")[-1].servo3_raw == 1000
+
+
+def test_tcp_endpoint_refused_is_an_error(capsys, tcp_port: int) -> None:
+    assert "cannot connect" in main_error_line(capsys, "--endpoint", f"tcp:127.0.0.1:{tcp_port}", "--duration-s", "0")
