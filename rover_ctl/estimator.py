@@ -117,7 +117,7 @@ class _RoverEkf(ExtendedKalmanFilter):
 
 
 def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndarray, np.ndarray]:
-    """State ``x`` (5x1) propagated ``dt_s`` with the gyro rate ``gyro_radps`` (ENU), and the
+    """State ``x`` (6x1) propagated ``dt_s`` with the gyro rate ``gyro_radps`` (ENU), and the
     Jacobian ``F = d x' / d x``."""
     psi, v, bias = float(x[PSI, 0]), float(x[V, 0]), float(x[BIAS, 0])
     w = gyro_radps - bias
@@ -202,15 +202,15 @@ class PoseEstimator:
             and heading_sigma_rad <= self.params.health_max_heading_sigma_rad
         )
         return Pose(
-            time_s=self._time_s,
+            time_s=float(self._time_s),
             east_m=float(x[E]),
             north_m=float(x[N]),
             heading_rad=float(x[PSI]),
             speed_mps=float(x[V]),
             yaw_rate_radps=self._rate_input_radps(self._time_s) - float(x[BIAS]),
             cov=cov,
-            healthy=healthy,
-            gps_ok=self._time_s - self._gps_fused_s <= self.params.gps_timeout_s,
+            healthy=bool(healthy),
+            gps_ok=bool(self._time_s - self._gps_fused_s <= self.params.gps_timeout_s),
             position_sigma_m=position_sigma_m,
             heading_sigma_rad=heading_sigma_rad,
         )

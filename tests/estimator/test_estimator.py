@@ -12,7 +12,7 @@ from scipy.stats import chi2
 
 from estimator.synthetic import CMAC, TRACK_M, Sensors, feed, simulate
 from rover_ctl.config import EstimatorParams
-from rover_ctl.estimator import GpsVerdict, PoseEstimator
+from rover_ctl.estimator import GpsVerdict, PoseEstimator, motion_model
 from rover_ctl.geo import wrap_pi
 from rover_ctl.readings import Attitude, GpsFix, WheelDistance
 
@@ -307,3 +307,22 @@ def test_gps_on_another_clock_is_ignored_and_a_reboot_starts_over():
     assert estimator.on_gps(GpsFix(0.2, lat, lon, 584.0, 3, 1.0, 0.0, math.nan, 10)) is GpsVerdict.RESET
     pose = estimator.pose()
     assert estimator.initialised and (pose.east_m, pose.north_m) == pytest.approx((5.0, 5.0), abs=1e-6)
+
+
+def test_motion_model_jacobian_matches_finite_differences():
+    x = np.array([[3.0], [-2.0], [2.9], [1.4], [0.02], [0.05]])
+    dt_s, gyro = 0.3, 0.4
+    _, jac = motion_model(x, dt_s, gyro)
+    step = 1e-6
+    numeric = np.zeros((6, 6))
+    for j in range(6):
+        dx = np.zeros((6, 1))
+        dx[j] = step
+        plus, _ = motion_model(x + dx, dt_s, gyro)
+        minus, _ = motion_model(x - dx, dt_s, gyro)
+        diff = plus - minus
+        diff[2] = wrap_pi(diff[2])
+        numeric[:, j] = diff[:, 0] / (2 * step)
+    assert np.allclose(jac, numeric, atol=1e-6)
+    moved, _ = motion_model(x, dt_s, gyro)
+    assert moved[2, 0] == pytest.approx(wrap_pi(2.9 + (0.4 - 0.02) * 0.3))
