@@ -147,3 +147,16 @@ def test_explain_covers_what_fired():
     assert len(fired) == 2 * 2 * 2 * 2  # two sets active in each of four inputs
     strengths = [s for _, s, _ in fired]
     assert strengths == sorted(strengths, reverse=True) and max(strengths) == pytest.approx(0.5)  # min(2/3, 2/3, 0.5, 0.8)
+
+
+def test_general_path_for_sets_that_are_not_a_chain(tmp_path):
+    # three sets overlapping at once: not a chain, so batch takes the general sparse path
+    header = HEADER.replace("sets = {{ lo = [0, 0, 0, 10], hi = [0, 10, inf, inf] }}",
+                            "sets = {{ lo = [0, 0, 0, 10], mid = [0, 5, 10], hi = [0, 10, inf, inf] }}", 1)  # fmt: skip
+    rules = ["if x is lo then y is a", "if x is mid and z is lo then y is b", "if x is mid and z is hi then y is a", "if x is hi then y is b"]
+    rb = load_rulebase(write(tmp_path, rules, header=header))
+    assert rb.inputs[0].max_active() == 3 and rb.inputs[0].chain_peaks() is None
+    xs, zs = np.meshgrid(np.linspace(-1, 11, 25), np.linspace(-1, 11, 25))
+    batch = rb.evaluate({"x": xs, "z": zs})["y"]
+    for x, z, y in zip(xs.ravel(), zs.ravel(), batch.ravel()):
+        assert rb.evaluate_one(x=x, z=z)["y"] == pytest.approx(y, abs=1e-4)
