@@ -20,6 +20,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections import deque
@@ -176,14 +177,23 @@ def sitl_process(*flags: str, start_timeout_s: float = 15.0) -> Iterator[str]:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     argv = [sys.executable, "-m", "sitl", "--lockstep", "--endpoint", f"tcpin:127.0.0.1:{port}", *flags]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    stderr = tempfile.TemporaryFile("w+")  # a file, not a pipe: it can never fill and block the emulator
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=stderr, text=True)
     try:
-        ready = threading.Event()
-        threading.Thread(target=lambda: [ready.set() for line in proc.stdout if line.startswith("rover-sitl: ready")],
-                         daemon=True).start()
-        if not ready.wait(start_timeout_s):
+        ready, started = threading.Event(), []
+
+        def drain_stdout() -> None:  # set ``ready`` on the ready line or at exit, then keep draining
+            for line in proc.stdout:
+                if line.startswith("rover-sitl: ready"):
+                    started.append(line)
+                    ready.set()
+            ready.set()
+
+        threading.Thread(target=drain_stdout, daemon=True).start()
+        if not ready.wait(start_timeout_s) or not started:
             proc.kill()
-            raise LockstepError(f"rover-sitl did not start: exit {proc.wait()}, {proc.stderr.read().strip()}")
+            stderr.seek(0)
+            raise LockstepError(f"rover-sitl did not start: exit {proc.wait()}, {stderr.read().strip()}")
         yield f"tcp:127.0.0.1:{port}"
     finally:
         if proc.poll() is None:
@@ -193,3 +203,4 @@ def sitl_process(*flags: str, start_timeout_s: float = 15.0) -> Iterator[str]:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+        stderr.close()

@@ -74,7 +74,16 @@ def rover_sitl(*flags: str, endpoints: list[str] | None = None, start_timeout_s:
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sitl = SitlProcess(proc, endpoints)
     lines: queue.Queue[str | None] = queue.Queue()
+    errors: queue.Queue[str | None] = queue.Queue()
     threading.Thread(target=_pump, args=(proc.stdout, lines), daemon=True).start()
+    # stderr is drained all along so a chatty emulator never blocks on a full pipe
+    stderr_reader = threading.Thread(target=_pump, args=(proc.stderr, errors), daemon=True)
+    stderr_reader.start()
+
+    def stderr_text() -> str:
+        stderr_reader.join(STOP_TIMEOUT_S)
+        return "\n".join(iter(lambda: errors.get_nowait() if not errors.empty() else None, None)).strip()
+
     try:
         deadline = time.monotonic() + start_timeout_s
         while True:
@@ -85,7 +94,7 @@ def rover_sitl(*flags: str, endpoints: list[str] | None = None, start_timeout_s:
             if line is None:
                 proc.kill()
                 raise RuntimeError(f"rover-sitl {' '.join(argv[3:])} did not become ready: "
-                                   f"exit {proc.wait()}, stderr: {proc.stderr.read().strip()}")
+                                   f"exit {proc.wait()}, stderr: {stderr_text()}")
             sitl.output.append(line)
             if line.startswith("PTY "):
                 sitl.pty_device = line.split(" ", 1)[1]
@@ -102,8 +111,7 @@ def rover_sitl(*flags: str, endpoints: list[str] | None = None, start_timeout_s:
                 proc.kill()
                 proc.wait()
         sitl.returncode = proc.returncode
-        sitl.stderr = proc.stderr.read()
-        proc.stderr.close()
+        sitl.stderr = stderr_text()
 
 
 def lockstep_client(url: str, **kwargs):
