@@ -70,8 +70,11 @@ class Endpoint:
         if peer is None:
             return
         data = self._read(peer)
-        if not data:
-            return
+        if data:
+            yield from self._decode(peer, data)
+
+    def _decode(self, peer: _Peer, data: bytes) -> Iterator[tuple[object, _Peer]]:
+        """The messages in ``data``; garbage and unknown message ids are counted, never raised."""
         try:
             msgs = peer.mav.parse_buffer(data) or []
         except mavlink.MAVError:
@@ -167,16 +170,7 @@ class UdpEndpoint(Endpoint):
             if peer is None:
                 peer = self.destinations[address] = _Peer(self.sock.fileno(), None, address)
                 self.peers = list(self.destinations.values())
-            try:
-                msgs = peer.mav.parse_buffer(data) or []
-            except mavlink.MAVError:
-                self.bad_frames += 1
-                continue
-            for msg in msgs:
-                if msg.get_type() == "BAD_DATA" or msg.get_type().startswith("UNKNOWN"):
-                    self.bad_frames += 1
-                    continue
-                yield msg, peer
+            yield from self._decode(peer, data)
 
     def _write(self, peer: _Peer, buf: bytes) -> None:
         try:
