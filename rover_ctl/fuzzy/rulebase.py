@@ -37,6 +37,11 @@ ROWS_PER_CHUNK = 32768
 base) to stay in the CPU cache."""
 
 
+MAX_BLOCK_TABLE = 1 << 22
+"""Largest blocks x corners table compiled for the chained batch path (the paper's is 8,192);
+bigger rule bases take the general path."""
+
+
 class RuleBaseError(ValueError):
     """A rule base that cannot be used; the message names the file and the rule."""
 
@@ -125,7 +130,9 @@ class RuleBase:
         # Consequent per cell with "no rule" sent to a sink column past the output's sets.
         self._slot_tables = [np.where(t < 0, n, t).astype(np.intp) for t, n in zip(self._table, self._n_sets_out)]
         self._chain_peaks = [v.chain_peaks() for v in self.inputs]
-        self._chained = all(p is not None for p in self._chain_peaks)
+        pairs = [len(v.sets) if v.period is not None else len(v.sets) - 1 for v in self.inputs]
+        block_table = int(np.prod(pairs, dtype=np.int64)) * 2 ** len(self.inputs)
+        self._chained = all(p is not None for p in self._chain_peaks) and block_table <= MAX_BLOCK_TABLE
         if self._chained:
             self._compile_blocks()
         points = [np.array([s.points for s in v.sets]) for v in self.outputs]
@@ -135,7 +142,7 @@ class RuleBase:
         ]
 
     def _compile_blocks(self) -> None:
-        """For chain inputs: consequent slot per (corner, block), the batch evaluator's table.
+        """For chain inputs: per block, which corners conclude which output set (batch path).
 
         A block is one choice of neighbouring-set pair per input; a corner picks the lower or the
         upper set of each pair (bit i of the corner number, the first input most significant).
