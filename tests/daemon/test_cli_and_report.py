@@ -1,0 +1,145 @@
+"""`rover-ctl run` / `rover-ctl sim` bad input and exit codes; report metrics from a synthetic run."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import socket
+import subprocess
+import sys
+
+import pytest
+
+from rover_ctl.cli import main
+from rover_ctl.geo import LocalFrame
+from rover_ctl.report import ReportError, write_report
+from rover_ctl.sim import ROVER_CTL
+from support import free_port
+
+HOME = (-35.363261, 149.165230, 584.0)
+
+
+def test_run_without_a_vehicle_exits_69(tmp_path, caplog):
+    port = free_port(socket.SOCK_STREAM)
+    with socket.socket() as server:  # a TCP port that accepts but never speaks MAVLink
+        server.bind(("127.0.0.1", port))
+        server.listen()
+        code = main(["run", "--vehicle", f"tcp:127.0.0.1:{port}", "--gcs", f"udpout:127.0.0.1:{free_port()}",
+                     "--set", "daemon.vehicle_wait_s=0.5", "--mission-store", "", "--log-dir", str(tmp_path)])  # fmt: skip
+    assert code == 69
+    assert "no vehicle heartbeat within 0.5 s" in caplog.text
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["run", "--set", "daemon.control_rate_hz=fast"], "daemon.control_rate_hz: expected a number"),
+        (["run", "--config", "/nonexistent/rover.toml"], "no such config file"),
+        (["run", "--rulebase", "/nonexistent/rules.toml"], "--rulebase /nonexistent/rules.toml"),
+        (["sim", "/nonexistent/m.waypoints"], "/nonexistent/m.waypoints: no such file"),
+        (["sim", "missions/cmac_jump.waypoints", "--world", "/nonexistent/w.geojson"], "--world /nonexistent/w.geojson: no such file"),
+        (["sim", "missions/cmac_jump.waypoints", "--obstacles", "-2"], "--obstacles -2: expected a count >= 0"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(args, message, capsys):
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_sigterm_stops_cleanly_with_neutral_first(tmp_path):
+    from pymavlink import mavutil
+
+    port = free_port(socket.SOCK_STREAM)
+    vehicle = mavutil.mavlink_connection(f"tcpin:127.0.0.1:{port}", source_system=1, dialect="ardupilotmega")
+    proc = subprocess.Popen([*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{port}",
+                             "--gcs", f"udpout:127.0.0.1:{free_port()}", "--mission-store", "", "--log-dir", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    try:
+        hb = vehicle.recv_match(type="HEARTBEAT", blocking=True, timeout=20)  # the daemon's, once it connected
+        assert hb is not None and hb.type == mavutil.mavlink.MAV_TYPE_GCS
+        vehicle.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GROUND_ROVER, mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)
+        mode = vehicle.recv_match(type="COMMAND_LONG", condition="COMMAND_LONG.command==176", blocking=True, timeout=10)
+        assert mode is not None and mode.param2 == 0  # MANUAL
+        vehicle.mav.command_ack_send(mode.command, mavutil.mavlink.MAV_RESULT_ACCEPTED)
+        # Nothing drives before the first GPS fix, so the first override is the stop's neutral,
+        # and it comes before the disarm.
+        proc.send_signal(signal.SIGTERM)
+        seen = []
+        while True:
+            msg = vehicle.recv_match(type=["RC_CHANNELS_OVERRIDE", "COMMAND_LONG"], blocking=True, timeout=10)
+            assert msg is not None, f"no disarm after SIGTERM; saw {seen}"
+            if msg.get_type() == "RC_CHANNELS_OVERRIDE":
+                seen.append(("override", msg.chan1_raw, msg.chan3_raw))
+            elif msg.command == mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+                seen.append(("arm", msg.param1))
+                break
+        assert seen == [("override", 1500, 1500), ("arm", 0.0)]
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        vehicle.close()
+
+
+def synthetic_run(folder, complete: bool = True):
+    """A straight 10 m drive north at 1 m/s; the estimate is 0.3 m east of the truth."""
+    frame = LocalFrame(*HOME)
+    events = [
+        {"t_s": 0.0, "type": "frame", "lat_deg": HOME[0], "lon_deg": HOME[1], "alt_m": HOME[2]},
+        {"t_s": 0.0, "type": "mission", "waypoints_total": 1, "items": 1, "waypoints_en": [[0.0, 10.0]]},
+        {"t_s": 1.0, "type": "mode", "mode": 10, "name": "AUTO"},
+        {"t_s": 1.0, "type": "plan", "goal_seq": 1, "length_m": 10.0, "path_en": [[0, 0], [0, 10]]},
+    ]
+    if complete:
+        events += [{"t_s": 11.0, "type": "reached", "seq": 1}, {"t_s": 11.0, "type": "complete", "seq": 1}]
+    (folder / "events.jsonl").write_text("".join(json.dumps(e) + "\n" for e in events))
+    truth = []
+    for k in range(0, 121):
+        t = k * 0.1
+        north = max(0.0, t - 1.0)
+        lat, lon = frame.to_geodetic(0.0, north)
+        truth.append({"t_s": t, "type": "state", "lat_deg": lat, "lon_deg": lon, "east_m": 0.0, "north_m": north,
+                      "yaw_deg": 0.0, "speed_mps": 1.0 if t > 1 else 0.0})  # fmt: skip
+        if k % 2 == 0:
+            truth.append({"t_s": t, "type": "gps", "dropped": False, "err_white_e_m": 0.3, "err_white_n_m": 0.0,
+                          "err_bias_e_m": 0.0, "err_bias_n_m": 0.4, "err_glitch_e_m": 0.0, "err_glitch_n_m": 0.0})  # fmt: skip
+    (folder / "truth.jsonl").write_text("".join(json.dumps(r) + "\n" for r in truth))
+    from rover_ctl.daemon import CSV_COLUMNS
+
+    rows = [",".join(CSV_COLUMNS)]
+    for k in range(0, 300):
+        t = k * 0.04
+        row = dict.fromkeys(CSV_COLUMNS, "")
+        row.update(t_s=t, est_east_m=0.3, est_north_m=max(0.0, t - 1.0), est_heading_rad=math.pi / 2, cross_track_m=0.1,
+                   latency_ms=1.0 + (k % 100) / 100.0, left_set_rpm=100, right_set_rpm=100, left_meas_rpm=99,
+                   right_meas_rpm=101, range_front_m="inf", target_distance_m=3.0, target_direction_rad=0.0)  # fmt: skip
+        rows.append(",".join(str(row[c]) for c in CSV_COLUMNS))
+    (folder / "control.csv").write_text("\n".join(rows) + "\n")
+
+
+def test_report_metrics_from_a_known_run(tmp_path):
+    synthetic_run(tmp_path)
+    metrics = write_report(tmp_path, plots=True)
+    assert metrics["success"] and metrics["collisions"] == 0
+    assert metrics["path_length_m"] == pytest.approx(10.0, abs=0.05)
+    assert metrics["planned_length_m"] == 10.0
+    assert metrics["duration_s"] == pytest.approx(10.0)
+    assert metrics["position_rmse_m"] == pytest.approx(0.3, abs=1e-3)
+    assert metrics["gps_rmse_m"] == pytest.approx(0.5, abs=1e-6)
+    assert metrics["gps_bias_rms_m"] == pytest.approx(0.4, abs=1e-6)
+    assert metrics["heading_rmse_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert metrics["cross_track_rms_m"] == pytest.approx(0.1)
+    assert 1.9 < metrics["loop_latency_p99_ms"] <= 2.0
+    assert (metrics["waypoints_reached"], metrics["waypoints_total"]) == (1, 1)
+    assert json.loads((tmp_path / "metrics.json").read_text())["success"] is True
+    assert {"map.png", "motors.png", "tracking.png"} <= {p.name for p in tmp_path.iterdir()}
+
+
+def test_report_of_an_unfinished_run_and_of_an_empty_folder(tmp_path):
+    synthetic_run(tmp_path, complete=False)
+    metrics = write_report(tmp_path, timed_out=True, plots=False)
+    assert not metrics["success"] and metrics["timed_out"] and metrics["waypoints_reached"] == 0
+    with pytest.raises(ReportError, match="control.csv: no control log"):
+        write_report(tmp_path / "nothing")
