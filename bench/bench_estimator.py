@@ -64,7 +64,8 @@ def drive(t_s: float) -> tuple[int, int]:
     if t_s < START_MOVING_S:
         return 1500, 1500
     phase = (t_s - START_MOVING_S) % 40.0
-    for end_s, throttle, steering in ((12, 1800, 1500), (18, 1750, 1700), (30, 1950, 1500), (36, 1750, 1280), (40, 1650, 1500)):
+    legs = ((12, 1800, 1500), (18, 1750, 1700), (30, 1950, 1500), (36, 1750, 1280), (40, 1650, 1500))
+    for end_s, throttle, steering in legs:
         if phase < end_s:
             return throttle, steering
     raise AssertionError("unreachable")
@@ -93,7 +94,10 @@ def _start_emulator(seed: int, duration_s: float, truth_log: Path, world: Path |
              f"--home={HOME[0]},{HOME[1]},{HOME[2]},0", "--duration-s", str(duration_s + 1.0)]
     if world is not None:
         flags += ["--world", str(world)]
-    argv = [sys.executable, "-c", _WITH_GPS_PARAMS, json.dumps(gps), *flags] if gps else [sys.executable, "-m", "sitl", *flags]
+    if gps:
+        argv = [sys.executable, "-c", _WITH_GPS_PARAMS, json.dumps(gps), *flags]
+    else:
+        argv = [sys.executable, "-m", "sitl", *flags]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     for line in proc.stdout:  # the emulator prints "rover-sitl: ready" once its endpoints are open
         if line.startswith("rover-sitl: ready"):
@@ -208,14 +212,20 @@ def run(quick: bool) -> dict:
         "10 s outage drift < 2% of distance": o["outage_drift_pct_max"] < GOALS["drift_pct"],
     }
     rows = [
-        "| scenario | GPS model (per axis) | raw GPS RMS m | GPS bias RMS m (limit) | fused RMS m | fused / raw | fused / bias | heading RMS deg |",
+        "| scenario | GPS model (per axis) | raw GPS RMS m | GPS bias RMS m (limit) | fused RMS m | fused / raw "
+        "| fused / bias | heading RMS deg |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    models = {"default": "0.5 m white + 1.0 m bias (tau 120 s)", "white": "2.5 m white + 0.3 m bias", "outage": "default, 10 s outage at 50 s"}
+    models = {
+        "default": "0.5 m white + 1.0 m bias (tau 120 s)",
+        "white": "2.5 m white + 0.3 m bias",
+        "outage": f"default, {OUTAGE_S:g} s outage at {OUTAGE_START_S:g} s",
+    }
     for name, s in scenarios.items():
         rows.append(
             f"| {name} | {models[name]} | {s['gps_rms_m']:.2f} | {s['gps_bias_rms_m']:.2f} | {s['fused_rms_m']:.2f} | "
-            f"{s['fused_rms_m'] / s['gps_rms_m']:.0%} | {s['fused_rms_m'] / s['gps_bias_rms_m']:.2f} | {s['heading_rms_deg']:.2f} |"
+            f"{s['fused_rms_m'] / s['gps_rms_m']:.0%} | {s['fused_rms_m'] / s['gps_bias_rms_m']:.2f} "
+            f"| {s['heading_rms_deg']:.2f} |"
         )
     rows.append("")
     rows.append(f"10 s GPS outage drift: {', '.join(f'{p:.2f}%' for p in o['outage_drift_pct'])} of distance travelled "
@@ -225,8 +235,8 @@ def run(quick: bool) -> dict:
     rows.append("|---|---|")
     rows += [f"| {goal} | {'yes' if ok else '**no**'} |" for goal, ok in checks.items()]
     rows.append("")
-    rows.append(f"{len(seeds)} seeds x {duration_s:g} s per scenario, lockstep over TCP, errors from t = {WARMUP_S:g} s; "
-                "truth from SIMSTATE, GPS error parts from the emulator's truth log.")
+    rows.append(f"{len(seeds)} seeds x {duration_s:g} s per scenario, lockstep over TCP, errors from "
+                f"t = {WARMUP_S:g} s; truth from SIMSTATE, GPS error parts from the emulator's truth log.")
     return {
         "title": "Pose estimator (GPS + wheels + gyro + compass EKF) vs emulator truth",
         "markdown": "\n".join(rows),

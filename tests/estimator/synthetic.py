@@ -108,7 +108,8 @@ def simulate(
                     e, n = e + ge, n + gn
             lat, lon = CMAC.to_geodetic(e, n)
             v = speed_mps(t)
-            vel = v * np.array([math.cos(heading[k]), math.sin(heading[k])]) + rng.normal(0.0, s.gps_velocity_sigma_mps, 2)
+            vel = v * np.array([math.cos(heading[k]), math.sin(heading[k])])
+            vel += rng.normal(0.0, s.gps_velocity_sigma_mps, 2)
             course_deg = math.degrees(enu_to_compass_rad(math.atan2(vel[1], vel[0])))
             readings.append(
                 GpsFix(t, lat, lon, 584.0, 3, s.gps_eph_m or s.gps_white_m, float(np.hypot(*vel)), course_deg, 12)

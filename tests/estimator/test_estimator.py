@@ -237,7 +237,9 @@ def test_wheel_counter_reset_is_rebaselined_not_fused():
     run = simulate(12.0, lambda t: 1.0, lambda t: 0.0, seed=2)
     estimator = new_estimator()
     readings = [
-        WheelDistance(r.time_s, r.left_m - 11.0, r.right_m - 11.0) if isinstance(r, WheelDistance) and r.time_s > 10.0 else r
+        WheelDistance(r.time_s, r.left_m - 11.0, r.right_m - 11.0)
+        if isinstance(r, WheelDistance) and r.time_s > 10.0
+        else r
         for r in run.readings
     ]
     feed(estimator, readings)
