@@ -27,9 +27,11 @@ Measurements, all linear:
 * compass (ATTITUDE yaw, NED -> ENU): measures ``psi + c``; the residual is wrapped to
   [-pi, pi);
 * GPS: ``(e, n)`` of the fix measures the position with ``sigma = max(eph, floor)``;
-* GPS course over ground, while moving faster than ``gps_course_min_speed_mps``: measures
-  ``psi`` (``psi + pi`` when reversing; a skid-steer rover does not crab) with
-  ``sigma = atan(sigma_vel / speed)``. This is what makes the compass offset observable.
+* GPS course and speed over ground, while moving faster than ``gps_course_min_speed_mps``:
+  measure ``psi`` (``psi + pi`` when reversing; a skid-steer rover does not crab) with
+  ``sigma = atan(sigma_vel / speed)``, and ``|v|`` with ``sigma_vel``. The course is what makes
+  the compass offset observable; the speed keeps ``v`` without wheel encoders (many ArduPilot
+  rovers have none).
 
 Why an EKF and not a UKF: the only nonlinearity is the heading in the position update, which is
 mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF with the exact
@@ -150,10 +152,18 @@ _H_POS, _HX_POS = _linear((E,), (N,))
 _H_PSI, _HX_PSI = _linear((PSI,))
 _H_COMPASS, _HX_COMPASS = _linear((PSI, COMPASS))
 _H_V, _HX_V = _linear((V,))
+_H_PSI_V, _HX_PSI_V = _linear((PSI,), (V,))
 
 
 def _angle_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
     return wrap_pi(z - hx)
+
+
+def _heading_first_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
+    """Residual of (heading, other): the heading part wrapped to [-pi, pi)."""
+    y = z - hx
+    y[0, 0] = wrap_pi(y[0, 0])
+    return y
 
 
 class PoseEstimator:
@@ -294,7 +304,7 @@ class PoseEstimator:
         distance2 = float((innovation.T @ np.linalg.solve(s_cov, innovation))[0, 0])
         if distance2 <= self.params.gate_sigma**2:
             self._kf.update(z, _H_POS, _HX_POS, R=r_cov)
-            self._fuse_course(r, lag_s)
+            self._fuse_velocity(r, lag_s)
             self._rejected_since_s = None
             self._gps_fused_s = self._time_s
             return GpsVerdict.ACCEPTED
@@ -312,18 +322,22 @@ class PoseEstimator:
         if self._time_s - time_s > self.params.clock_restart_s:
             self._clear()
 
-    def _fuse_course(self, r: GpsFix, lag_s: float) -> None:
-        """GPS course over ground as a heading measurement, when moving fast enough to mean it."""
+    def _fuse_velocity(self, r: GpsFix, lag_s: float) -> None:
+        """GPS course and speed over ground as heading and speed measurements, when moving fast
+        enough for the course to mean something (slower, noise dominates both)."""
         p = self.params
         if not (math.isfinite(r.course_deg) and math.isfinite(r.speed_mps)) or r.speed_mps < p.gps_course_min_speed_mps:
             return
         x = self._kf.x[:, 0]
         track_rad = compass_to_enu_rad(math.radians(r.course_deg))
-        if x[V] < 0.0:
-            track_rad += math.pi  # reversing: the rover points against its track
-        z = wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - x[BIAS]) * lag_s)
-        sigma = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps)
-        self._kf.update(np.array([[z]]), _H_PSI, _HX_PSI, R=np.array([[sigma * sigma]]), residual=_angle_residual)
+        speed_mps = r.speed_mps
+        if x[V] < 0.0:  # reversing: the rover points against its track
+            track_rad += math.pi
+            speed_mps = -speed_mps
+        z = np.array([[wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - x[BIAS]) * lag_s)], [speed_mps]])
+        course_sigma = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps)
+        r_cov = np.diag([course_sigma**2, p.gps_velocity_sigma_mps**2])
+        self._kf.update(z, _H_PSI_V, _HX_PSI_V, R=r_cov, residual=_heading_first_residual)
         self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
 
     def _advance(self, time_s: float) -> bool:

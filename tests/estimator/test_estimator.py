@@ -328,3 +328,20 @@ def test_motion_model_jacobian_matches_finite_differences():
     assert np.allclose(jac, numeric, atol=1e-6)
     moved, _ = motion_model(x, dt_s, gyro)
     assert moved[2, 0] == pytest.approx(wrap_pi(2.9 + (0.4 - 0.02) * 0.3))
+
+
+def test_without_wheel_encoders_gps_velocity_keeps_the_speed():
+    """Many ArduPilot rovers send no WHEEL_DISTANCE: the gyro drives the clock, GPS the speed."""
+    run = simulate(60.0, lambda t: 1.0 + 0.5 * math.sin(t / 6.0), lambda t: 0.1, seed=17)
+    estimator = new_estimator()
+    rec = Recorder(run, estimator)
+    for r in run.readings:
+        if isinstance(r, GpsFix):
+            estimator.on_gps(r)
+        elif isinstance(r, Attitude):
+            estimator.on_attitude(r)
+            rec(r.time_s)
+    speed_errors = [abs(p.speed_mps - (1.0 + 0.5 * math.sin(p.time_s / 6.0))) for p in rec.poses[int(CONVERGED_S / 0.02):]]
+    assert float(np.sqrt(np.mean(np.square(speed_errors)))) < 0.15
+    assert rec.position_rms_m() < 0.5 * gps_rms_m(run)
+    assert all(p.healthy for p in rec.poses[int(CONVERGED_S / 0.02):])
