@@ -40,7 +40,7 @@ from rover_ctl.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsaf
 from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.gcs import ConfigParams, GcsLink, RoverMode, VehicleState
 from rover_ctl.geo import LocalFrame, enu_to_compass_rad
-from rover_ctl.link import MODE_MANUAL, FrameMarker, LinkError, StatusText, Truth, VehicleLink, VehicleStatus
+from rover_ctl.link import MODE_MANUAL, Battery, FrameMarker, LinkError, StatusText, Truth, VehicleLink, VehicleStatus
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
 from rover_ctl.navigator import Navigator
@@ -116,6 +116,7 @@ class Daemon:
         self.ranges: dict[int, RangeReading] = {}
         self.last_gps: Any = None
         self.truth: Truth | None = None
+        self.battery: Battery | None = None
         # Autopilot state the GCS sees.
         self.mode = int(RoverMode.HOLD)
         self.mission = Mission()
@@ -264,6 +265,8 @@ class Daemon:
                 self.estimator.on_gps(item)
         elif isinstance(item, VehicleStatus):
             self.vehicle = item
+        elif isinstance(item, Battery):
+            self.battery = item
         elif isinstance(item, Truth):
             self.truth = item
         elif isinstance(item, StatusText):
@@ -570,10 +573,14 @@ class Daemon:
     # ---- telemetry to the GCS ------------------------------------------------------------------
 
     def _send_telemetry(self) -> None:
+        now = time.monotonic()
+        if self.link.last_gps_msg is not None:
+            self.gcs.send_gps_raw_int(now, self.link.last_gps_msg)
+        if self.battery is not None:
+            self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct)
         if self.estimator is None or not self.estimator.initialised:
             return
         pose = self.estimator.pose()
-        now = time.monotonic()
         lat, lon = self.frame.to_geodetic(pose.east_m, pose.north_m)
         time_boot_ms = int(pose.time_s * 1000)
         compass_rad = enu_to_compass_rad(pose.heading_rad)

@@ -93,6 +93,14 @@ class ServoOutput:
 
 
 @dataclass(frozen=True)
+class Battery:
+    """SYS_STATUS: battery voltage and remaining charge (-1 when unknown)."""
+
+    voltage_v: float
+    remaining_pct: int
+
+
+@dataclass(frozen=True)
 class CommandResult:
     command: int
     result: int
@@ -186,6 +194,8 @@ class VehicleLink:
         """Vehicle time at the last message from the vehicle (lockstep markers excluded)."""
         self.vehicle_time_s = 0.0
         """Latest vehicle timestamp seen (sensor clock)."""
+        self.last_gps_msg: Any = None
+        """The latest GPS_RAW_INT as received, forwarded to ground stations unchanged."""
         self.frames_received = 0
         self.garbage_frames = 0
         self._next_heartbeat_s = 0.0
@@ -259,7 +269,10 @@ class VehicleLink:
             return WheelDistance(time_s=msg.time_usec / 1e6, left_m=msg.distance[0], right_m=msg.distance[1])
         if kind == "GPS_RAW_INT":
             self._advance(msg.time_usec / 1e6)
+            self.last_gps_msg = msg
             return decode_gps(msg)
+        if kind == "SYS_STATUS":
+            return Battery(msg.voltage_battery / 1000.0, msg.battery_remaining)
         if kind == "DISTANCE_SENSOR":
             self._advance(msg.time_boot_ms / 1000.0)
             return decode_range(msg, msg.time_boot_ms / 1000.0)

@@ -142,10 +142,14 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
         for g in run.gps
     ]
     gps_bias = [math.hypot(g["err_bias_e_m"], g["err_bias_n_m"]) for g in run.gps]
-    plans: dict[int, float] = {}
-    for event in run.events:
-        if event["type"] == "plan":
-            plans.setdefault(event["goal_seq"], event["length_m"])  # first plan of each leg
+    planned_m = 0.0
+    leg_started = False
+    for event in run.events:  # the first plan of each leg counts, re-plans do not
+        if event["type"] in ("current", "mode"):
+            leg_started = True
+        elif event["type"] == "plan" and leg_started:
+            planned_m += event["length_m"]
+            leg_started = False
     reached = sorted({e["seq"] for e in run.events if e["type"] == "reached"})
     totals = [e["waypoints_total"] for e in run.events if e["type"] == "mission"]
     latency = c.get("latency_ms", np.array([]))
@@ -157,7 +161,7 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
         "timed_out": timed_out,
         "collisions": collisions,
         "path_length_m": round(_path_length(run.truth_east[in_window], run.truth_north[in_window]), 2),
-        "planned_length_m": round(sum(plans.values()), 2),
+        "planned_length_m": round(planned_m, 2),
         "duration_s": round(end - start, 2),
         "cross_track_rms_m": round(_rms(c["cross_track_m"][active]), 3),
         "cross_track_max_m": round(float(np.nanmax(np.abs(c["cross_track_m"][active]))) if active.any() else math.nan, 3),
