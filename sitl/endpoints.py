@@ -20,6 +20,8 @@ READ_SIZE_BYTES = 65536
 """Bytes read per readable descriptor per poll."""
 MAX_BACKLOG_BYTES = 1 << 20
 """A stream peer that stops reading loses output beyond this backlog (as a full serial buffer)."""
+MAX_DATAGRAM_BYTES = 1400
+"""Packets of one frame are joined into datagrams up to this size (below a 1500-byte Ethernet MTU)."""
 SYSTEM_ID = 1
 COMPONENT_ID = 1
 """The emulated autopilot's MAVLink ids (ArduPilot defaults: SYSID_THISMAV 1, autopilot component 1)."""
@@ -37,6 +39,8 @@ class _Peer:
         self.sock = sock
         self.address = address
         self.backlog = b""
+        self.outbox: list[bytes] = []
+        """Packed messages not yet written."""
         self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self.mav.robust_parsing = True
 
@@ -50,6 +54,8 @@ class Endpoint:
     """A MAVLink endpoint: ``send`` to every peer, ``poll`` for received messages."""
 
     kind = ""
+    max_write_bytes: int | None = None
+    """Largest single write (datagrams), cut at packet boundaries; None: unlimited (streams)."""
 
     def __init__(self, url: str) -> None:
         self.url = url
@@ -61,8 +67,16 @@ class Endpoint:
         return [peer.fd for peer in self.peers]
 
     def send(self, msg) -> None:
+        """Queue ``msg`` for every peer; :meth:`flush` writes the queue (one system call per peer)."""
+        for peer in self.peers:
+            peer.outbox.append(peer.pack(msg))
+
+    def flush(self) -> None:
         for peer in list(self.peers):
-            self._write(peer, peer.pack(msg))
+            if peer.outbox:
+                packets, peer.outbox = peer.outbox, []
+                for chunk in _chunks(packets, self.max_write_bytes):
+                    self._write(peer, chunk)
 
     def poll(self, fd: int) -> Iterator[tuple[object, _Peer]]:
         """Read what is waiting on ``fd`` and yield the decoded messages with the peer they came from."""
@@ -87,9 +101,9 @@ class Endpoint:
             yield msg, peer
 
     def reply(self, peer: _Peer, msg) -> None:
-        """Send to the one peer a request came from (COMMAND_ACK, PARAM_VALUE)."""
+        """Queue for the one peer a request came from (COMMAND_ACK, PARAM_VALUE)."""
         if peer in self.peers:
-            self._write(peer, peer.pack(msg))
+            peer.outbox.append(peer.pack(msg))
 
     def close(self) -> None:
         for peer in self.peers:
@@ -131,6 +145,23 @@ class Endpoint:
             os.close(peer.fd)
 
 
+def _chunks(packets: list[bytes], limit: int | None) -> Iterator[bytes]:
+    """Join packets into writes of at most ``limit`` bytes (a lone larger packet goes alone)."""
+    if limit is None:
+        yield b"".join(packets)
+        return
+    chunk: list[bytes] = []
+    size = 0
+    for packet in packets:
+        if chunk and size + len(packet) > limit:
+            yield b"".join(chunk)
+            chunk, size = [], 0
+        chunk.append(packet)
+        size += len(packet)
+    if chunk:
+        yield b"".join(chunk)
+
+
 def _host_port(url: str, rest: str) -> tuple[str, int]:
     host, sep, port = rest.rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
@@ -139,7 +170,10 @@ def _host_port(url: str, rest: str) -> tuple[str, int]:
 
 
 class UdpEndpoint(Endpoint):
-    """udpin (bind, answer every address heard from) or udpout (send to a fixed address)."""
+    """udpin (bind, answer every address heard from) or udpout (send to a fixed address).
+    Several packets share a datagram, as ArduPilot sends them."""
+
+    max_write_bytes = MAX_DATAGRAM_BYTES
 
     def __init__(self, url: str, address: tuple[str, int], listen: bool) -> None:
         super().__init__(url)

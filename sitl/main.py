@@ -182,10 +182,15 @@ class Emulator:
                 if not self._lost(endpoint, outgoing=True):
                     endpoint.send(msg)
 
+    def flush(self) -> None:
+        for endpoint in self.endpoints:
+            endpoint.flush()
+
     def send_marker(self) -> None:
         marker = mavlink.MAVLink_timesync_message(0, self.clock.t_ns)
         for endpoint in self.endpoints:
             endpoint.send(marker)
+        self.flush()
         self.marker.sent(self.clock.t_ns)
 
     def serve(self, timeout_s: float) -> bool:
@@ -217,6 +222,7 @@ class Emulator:
                         endpoint.reply(peer, reply)
             if self.lockstep and endpoint is self.controller and len(endpoint.peers) > peers_before:
                 self.send_marker()  # a controller that just connected gets the marker at once
+        self.flush()
         return answered
 
     # ---- main loop -------------------------------------------------------------------------
@@ -231,6 +237,7 @@ class Emulator:
                 self.truth.state(t_s, self.rover.truth())
             self.broadcast(self.vehicle.due(t_s))
             if duration_s is not None and t_s >= duration_s - 1e-9:
+                self.flush()
                 break
             if self.lockstep:
                 self.send_marker()
@@ -238,6 +245,7 @@ class Emulator:
                     if self.marker.resend_in_s() <= 0:
                         self.send_marker()
             else:
+                self.flush()
                 next_s = t_s + self.clock.frame_s
                 while not self.stop:
                     self.serve(self.pacer.wait_s(next_s))
