@@ -30,7 +30,7 @@ from typing import Any
 from rover_ctl.config import PlannerParams, RobotParams
 from rover_ctl.geo import LocalFrame
 from rover_ctl.mission.files import save_mission
-from rover_ctl.mission.model import FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
+from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
 from rover_ctl.planner import Circle, Planner
 from rover_ctl.report import read_jsonl
 from rover_ctl.sim import SimError, SimOptions, simulate

@@ -3,7 +3,7 @@
 Each turn of the loop
 
 1. reads the vehicle link and feeds every reading to the estimator (wheel distances also to the
-   wheel-speed meter; ranges and truth are kept);
+   wheel-speed meter; the latest range per orientation is kept; SIMSTATE truth only goes to the tlog);
 2. runs a control step when the vehicle (sensor) clock has reached the next tick of
    ``daemon.control_rate_hz``; in lockstep (the vehicle sends TIMESYNC frame markers) the step
    runs at the frame's marker and the marker is answered only after the step's override went out;
@@ -27,7 +27,6 @@ import logging
 import math
 import select
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +39,7 @@ from rover_ctl.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsaf
 from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.gcs import ConfigParams, GcsLink, RoverMode, VehicleState
 from rover_ctl.geo import LocalFrame, enu_to_compass_rad
-from rover_ctl.link import MODE_MANUAL, Battery, FrameMarker, LinkError, StatusText, Truth, VehicleLink, VehicleStatus
+from rover_ctl.link import MODE_MANUAL, Battery, FrameMarker, LinkError, StatusText, VehicleLink, VehicleStatus
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
 from rover_ctl.navigator import Navigator
@@ -90,7 +89,6 @@ class Daemon:
 
     def __init__(self, config: Config, rulebase: str = "default", log_dir: str | Path | None = None):
         self.config = config
-        self.rulebase_name = rulebase
         self.rulebase = load_rulebase(rulebase)
         self.log_dir = Path(log_dir) if log_dir else (Path(config.daemon.log_dir) if config.daemon.log_dir else None)
         self.params = config.daemon
@@ -114,8 +112,7 @@ class Daemon:
         self._silent_neutral_wall_s = 0.0
         self._marker_wall_s = 0.0
         self.ranges: dict[int, RangeReading] = {}
-        self.last_gps: Any = None
-        self.truth: Truth | None = None
+        self._last_said: str | None = None
         self.battery: Battery | None = None
         # Autopilot state the GCS sees.
         self.mode = int(RoverMode.HOLD)
@@ -256,7 +253,6 @@ class Daemon:
             self.ranges[item.orientation] = item
         elif isinstance(item, GpsFix):
             self._rx_perf = time.perf_counter()
-            self.last_gps = item
             if item.has_fix:
                 self.last_fix_s = item.time_s
             if self.home is None and item.has_fix:
@@ -267,8 +263,6 @@ class Daemon:
             self.vehicle = item
         elif isinstance(item, Battery):
             self.battery = item
-        elif isinstance(item, Truth):
-            self.truth = item
         elif isinstance(item, StatusText):
             log.info("vehicle: %s", item.text)
             self.events.write(item.time_s, "statustext", text=item.text, severity=item.severity)
@@ -566,7 +560,7 @@ class Daemon:
         return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0
 
     def _say_once(self, text: str) -> None:
-        if text != getattr(self, "_last_said", None):
+        if text != self._last_said:
             self._last_said = text
             self._say(text, mav.MAV_SEVERITY_WARNING)
 

@@ -7,7 +7,6 @@ import math
 import signal
 import socket
 import subprocess
-import sys
 
 import pytest
 

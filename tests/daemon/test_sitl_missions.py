@@ -79,7 +79,7 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
         assert run.wait_for(lambda p: 1 in p.reached, sim_timeout_s=60.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False  # get up to speed on the next leg
         assert run.set_mode(MODE_HOLD) == mavutil.mavlink.MAV_RESULT_ACCEPTED
-        assert run.wait_for(lambda p: p.mode == MODE_HOLD, sim_timeout_s=5.0)
+        assert run.wait_for(lambda p: p.mode == MODE_HOLD, wall_timeout_s=3.0)  # heartbeats are 1 Hz wall
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
         assert run.set_mode(MODE_RTL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
         home = LocalFrame(*HOME)
