@@ -8,8 +8,9 @@ Per scenario, over seeded runs (after ``WARMUP_S``):
   bias part (from the emulator's truth log: the slowly wandering error no filter can remove
   without another absolute reference);
 - heading RMS error;
-- with a 10 s GPS outage (a scheduled ``gps_outage`` fault), the drift over the outage, i.e. the
-  change of the position error vector, as % of the distance travelled meanwhile.
+- with scheduled faults: a 39 m GPS glitch for 4 s (``gps_glitch``), the share of glitched fixes
+  rejected and the largest error meanwhile; a 10 s GPS outage (``gps_outage``), the drift over
+  it, i.e. the change of the position error vector, as % of the distance travelled meanwhile.
 
 Scenarios: ``default`` is the emulator's realistic receiver (0.5 m white + 1.0 m bias per axis,
 tau 120 s); ``white`` is mostly white noise (2.5 m white, 0.3 m bias). The emulator has no flag
@@ -34,7 +35,7 @@ import numpy as np
 
 from bench.lockstep_client import LockstepClient
 from rover_ctl.config import EstimatorParams, RobotParams
-from rover_ctl.estimator import PoseEstimator
+from rover_ctl.estimator import GpsVerdict, PoseEstimator
 from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
 from rover_ctl.link import decode_gps
 from rover_ctl.readings import Attitude, WheelDistance
@@ -45,6 +46,15 @@ WARMUP_S = 10.0
 START_MOVING_S = 2.0
 OUTAGE_START_S = 50.0
 OUTAGE_S = 10.0
+GLITCH_START_S = 25.0
+GLITCH_S = 4.0
+"""Shorter than the estimator's glitch_reset_s: the whole glitch should be rejected."""
+GLITCH_EAST_M, GLITCH_NORTH_M = 25.0, 30.0
+FAULTS = [
+    {"name": "gps_glitch", "start_s": GLITCH_START_S, "duration_s": GLITCH_S, "north_m": GLITCH_NORTH_M,
+     "east_m": GLITCH_EAST_M},
+    {"name": "gps_outage", "start_s": OUTAGE_START_S, "duration_s": OUTAGE_S},
+]
 READY_TIMEOUT_S = 20.0
 GOALS = {"white_ratio": 0.40, "bias_margin": 1.15, "heading_deg": 3.0, "drift_pct": 2.0}
 
@@ -80,6 +90,8 @@ class RunResult:
     gps_total_sq: list = field(default_factory=list)
     gps_bias_sq: list = field(default_factory=list)
     gps_white_sq: list = field(default_factory=list)
+    verdicts: list = field(default_factory=list)
+    """(frame time, GpsVerdict) of every fix."""
 
 
 def _free_tcp_port() -> int:
@@ -115,7 +127,7 @@ def _stop(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
-def run_once(seed: int, duration_s: float, gps: dict | None = None, outage: bool = False) -> RunResult:
+def run_once(seed: int, duration_s: float, gps: dict | None = None, faults: bool = False) -> RunResult:
     """One lockstep run; returns the per-frame errors, the true path and the GPS error parts."""
     frame = LocalFrame(*HOME)
     estimator = PoseEstimator(frame, EstimatorParams(), RobotParams().track_m)
@@ -123,10 +135,9 @@ def run_once(seed: int, duration_s: float, gps: dict | None = None, outage: bool
     with tempfile.TemporaryDirectory(prefix="bench_estimator_") as tmp:
         truth_log = Path(tmp) / "truth.jsonl"
         world = None
-        if outage:
-            world = Path(tmp) / "outage.geojson"
-            world.write_text(json.dumps({"type": "FeatureCollection", "features": [], "faults": [
-                {"name": "gps_outage", "start_s": OUTAGE_START_S, "duration_s": OUTAGE_S}]}))
+        if faults:
+            world = Path(tmp) / "faults.geojson"
+            world.write_text(json.dumps({"type": "FeatureCollection", "features": [], "faults": FAULTS}))
         proc, url = _start_emulator(seed, duration_s, truth_log, world, gps)
         try:
             client = LockstepClient(url, timeout_s=READY_TIMEOUT_S)
@@ -141,7 +152,7 @@ def run_once(seed: int, duration_s: float, gps: dict | None = None, outage: bool
                     elif kind == "ATTITUDE":
                         estimator.on_attitude(Attitude(msg.time_boot_ms / 1000.0, msg.yaw, msg.yawspeed))
                     elif kind == "GPS_RAW_INT":
-                        estimator.on_gps(decode_gps(msg))
+                        result.verdicts.append((t_s, estimator.on_gps(decode_gps(msg))))
                     elif kind == "SIMSTATE":
                         truth = msg
                 if truth is not None and estimator.initialised:
@@ -184,12 +195,22 @@ def outage_drift_pct(result: RunResult) -> tuple[float, float]:
     return drift_m, 100.0 * drift_m / distance_m
 
 
+def glitch_figures(result: RunResult) -> tuple[float, float]:
+    """(share of the glitched fixes rejected, largest position error from the glitch's start to
+    2 s after its end)."""
+    start, end = GLITCH_START_S, GLITCH_START_S + GLITCH_S
+    during = [v for t, v in result.verdicts if start + 0.01 < t < end - 0.01]
+    rejected = sum(v is GpsVerdict.REJECTED for v in during) / len(during)
+    worst_m = max(math.hypot(*e) for t, e in result.err_by_t.items() if start <= t <= end + 2.0)
+    return rejected, worst_m
+
+
 def run(quick: bool) -> dict:
     seeds = [1, 2] if quick else [1, 2, 3, 4, 5]
     duration_s = 70.0 if quick else 130.0
     scenarios = {}
-    for name, gps, outage in (("default", None, False), ("white", WHITE_GPS, False), ("outage", None, True)):
-        runs = [run_once(seed, duration_s, gps, outage) for seed in seeds]
+    for name, gps, faults in (("default", None, False), ("white", WHITE_GPS, False), ("faults", None, True)):
+        runs = [run_once(seed, duration_s, gps, faults) for seed in seeds]
         figures = {
             "fused_rms_m": _rms(np.concatenate([r.pos_err_m for r in runs])),
             "gps_rms_m": math.sqrt(float(np.mean(np.concatenate([r.gps_total_sq for r in runs])))),
@@ -198,18 +219,22 @@ def run(quick: bool) -> dict:
             "heading_rms_deg": math.degrees(_rms(np.concatenate([r.head_err_rad for r in runs]))),
             "per_seed_fused_rms_m": [_rms(r.pos_err_m) for r in runs],
         }
-        if outage:
+        if faults:
+            glitches = [glitch_figures(r) for r in runs]
+            figures["glitch_rejected_share"] = [g for g, _ in glitches]
+            figures["glitch_worst_error_m"] = [w for _, w in glitches]
             drifts = [outage_drift_pct(r) for r in runs]
             figures["outage_drift_m"] = [d for d, _ in drifts]
             figures["outage_drift_pct"] = [p for _, p in drifts]
             figures["outage_drift_pct_max"] = max(p for _, p in drifts)
         scenarios[name] = figures
-    d, w, o = scenarios["default"], scenarios["white"], scenarios["outage"]
+    d, w, o = scenarios["default"], scenarios["white"], scenarios["faults"]
     checks = {
         "white: fused <= 40% of raw GPS": w["fused_rms_m"] <= GOALS["white_ratio"] * w["gps_rms_m"],
         "default: fused within 15% of the bias limit": d["fused_rms_m"] <= GOALS["bias_margin"] * d["gps_bias_rms_m"],
         "heading < 3 deg (all scenarios)": max(s["heading_rms_deg"] for s in scenarios.values()) < GOALS["heading_deg"],
         "10 s outage drift < 2% of distance": o["outage_drift_pct_max"] < GOALS["drift_pct"],
+        "39 m glitch: every glitched fix rejected": min(o["glitch_rejected_share"]) == 1.0,
     }
     rows = [
         "| scenario | GPS model (per axis) | raw GPS RMS m | GPS bias RMS m (limit) | fused RMS m | fused / raw "
@@ -219,7 +244,8 @@ def run(quick: bool) -> dict:
     models = {
         "default": "0.5 m white + 1.0 m bias (tau 120 s)",
         "white": "2.5 m white + 0.3 m bias",
-        "outage": f"default, {OUTAGE_S:g} s outage at {OUTAGE_START_S:g} s",
+        "faults": f"default; glitch {GLITCH_START_S:g}-{GLITCH_START_S + GLITCH_S:g} s, "
+                  f"outage {OUTAGE_START_S:g}-{OUTAGE_START_S + OUTAGE_S:g} s (raw GPS RMS includes the glitch)",
     }
     for name, s in scenarios.items():
         rows.append(
@@ -230,6 +256,9 @@ def run(quick: bool) -> dict:
     rows.append("")
     rows.append(f"10 s GPS outage drift: {', '.join(f'{p:.2f}%' for p in o['outage_drift_pct'])} of distance travelled "
                 f"({', '.join(f'{m:.2f} m' for m in o['outage_drift_m'])}).")
+    rows.append(f"{math.hypot(GLITCH_EAST_M, GLITCH_NORTH_M):.0f} m GPS glitch for {GLITCH_S:g} s: "
+                f"{', '.join(f'{g:.0%}' for g in o['glitch_rejected_share'])} of glitched fixes rejected; largest "
+                f"error meanwhile {', '.join(f'{m:.2f} m' for m in o['glitch_worst_error_m'])}.")
     rows.append("")
     rows.append("| goal | met |")
     rows.append("|---|---|")
