@@ -115,10 +115,7 @@ def rover_sitl(*flags: str, endpoints: list[str] | None = None, start_timeout_s:
 
 
 def lockstep_client(url: str, **kwargs):
-    """A bench.lockstep_client.LockstepClient (the repository root may not be on sys.path under xdist)."""
-    root = str(Path(__file__).resolve().parents[2])
-    if root not in sys.path:
-        sys.path.insert(0, root)
+    """A bench.lockstep_client.LockstepClient (the repository root is on pytest's pythonpath)."""
     from bench.lockstep_client import LockstepClient
 
     return LockstepClient(url, **kwargs)
