@@ -14,6 +14,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from rover_ctl.fuzzy.fcl import parse_fcl
 from rover_ctl.fuzzy.membership import FuzzySet, Variable
 from rover_ctl.fuzzy.rulebase import Rule, RuleBase, RuleBaseError
 
@@ -39,14 +40,18 @@ def resolve(name_or_path: str | Path) -> Path:
 
 
 def load_rulebase(name_or_path: str | Path) -> RuleBase:
-    """Load and check a rule base by shipped name or path."""
+    """Load and check a rule base by shipped name or path (TOML, or FCL for a ``.fcl`` file)."""
     path = resolve(name_or_path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise RuleBaseError(f"{path}: invalid TOML: {exc}") from None
+        text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise RuleBaseError(f"{path}: cannot read: {exc}") from None
+    if path.suffix.lower() == ".fcl":
+        return parse_rulebase(parse_fcl(text, path.name), path.name)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RuleBaseError(f"{path}: invalid TOML: {exc}") from None
     return parse_rulebase(data, path.name)
 
 
