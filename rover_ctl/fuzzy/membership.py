@@ -105,7 +105,7 @@ class Variable:
 
     def memberships_one(self, x: float) -> list[float]:
         """Membership of every set for one float (pure Python)."""
-        if math.isnan(x):
+        if math.isnan(x) or (self.period is not None and math.isinf(x)):  # no angle: nothing fires
             return [0.0] * len(self.sets)
         if self.period is None:
             return [s.membership_one(x) for s in self.sets]

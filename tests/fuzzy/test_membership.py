@@ -61,9 +61,10 @@ def test_circular_universe_wraps(x, expected):
     assert DIRECTION.memberships_one(x) == pytest.approx(expected)
 
 
-def test_nan_fires_nothing():
-    assert DIRECTION.memberships(np.array([math.nan]))[0].tolist() == [0, 0, 0, 0]
-    assert DIRECTION.memberships_one(math.nan) == [0, 0, 0, 0]
+@pytest.mark.parametrize("x", [math.nan, math.inf, -math.inf])
+def test_no_angle_fires_nothing(x):
+    assert DIRECTION.memberships(np.array([x]))[0].tolist() == [0, 0, 0, 0]
+    assert DIRECTION.memberships_one(x) == [0, 0, 0, 0]
 
 
 def test_max_active_counts_overlapping_sets():
