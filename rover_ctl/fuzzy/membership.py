@@ -92,7 +92,8 @@ class Variable:
             for k, fuzzy_set in enumerate(self.sets):
                 rows[k] = fuzzy_set.membership(x)
             return rows
-        wrapped = np.mod(x, self.period)
+        with np.errstate(invalid="ignore"):  # an infinite angle wraps to NaN: fires nothing
+            wrapped = np.mod(x, self.period)
         for k, fuzzy_set in enumerate(self.sets):
             a, _, _, d = fuzzy_set.points
             rows[k] = fuzzy_set.membership(wrapped)
@@ -160,4 +161,6 @@ class Variable:
         n = len(peaks)
         if self.period is None:
             return np.clip(np.searchsorted(peaks, x, side="right") - 1, 0, n - 2)
-        return (np.searchsorted(peaks, np.mod(x, self.period), side="right") - 1) % n
+        with np.errstate(invalid="ignore"):
+            wrapped = np.mod(x, self.period)
+        return (np.searchsorted(peaks, wrapped, side="right") - 1) % n
