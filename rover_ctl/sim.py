@@ -8,8 +8,9 @@ sim-time budget runs out. It also listens on a second emulator endpoint (sysid 2
 to drive) to see collisions and to set the emulator's SIM_* fault parameters (tests use it).
 
 Ports are chosen free on 127.0.0.1: the vehicle link is TCP (the daemon connects to the
-emulator's ``tcpin``), the GCS link UDP (the daemon sends to where we listen, as it sends to
-QGroundControl), the watcher UDP.
+emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: pymavlink serves
+every peer that has spoken, so a second ground station such as MAVProxy can attach to a running
+sim), the watcher UDP.
 
 The report (``rover_ctl.report``) is written into the output folder with both tlogs, the control
 CSV, the event log, the emulator's truth log and the processes' logs.
@@ -112,6 +113,8 @@ class Progress:
     texts: list[str] = field(default_factory=list)
     """Every STATUSTEXT from the daemon, in order."""
     position_en: tuple[float, float] | None = None
+    gcs_url: str = ""
+    """Where another ground station can attach to the daemon."""
 
     @property
     def elapsed_sim_s(self) -> float:
@@ -145,6 +148,10 @@ class SimRun:
         self.watcher: Any = None
         self.vehicle_port = free_port(socket.SOCK_STREAM)
         self.gcs_port = free_port(socket.SOCK_DGRAM)
+        self.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
+        """Where a ground station reaches the daemon (it listens; every peer that speaks is served,
+        so MAVProxy can attach to a running sim with ``--master`` this URL)."""
+        self.progress.gcs_url = self.gcs_url
         self.watch_port = free_port(socket.SOCK_DGRAM)
         self._logs: list[Any] = []
         self._last_rx_wall = time.monotonic()
@@ -181,7 +188,7 @@ class SimRun:
     def _daemon_command(self) -> list[str]:
         o = self.options
         cmd = [*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{self.vehicle_port}",
-               "--gcs", f"udpout:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-dir", str(self.out),
+               "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-dir", str(self.out),
                "--mission-store", ""]  # fmt: skip
         for item in o.config_overrides:
             cmd += ["--set", item]
@@ -199,7 +206,7 @@ class SimRun:
         self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        self.gcs = MissionClient(f"udpin:127.0.0.1:{self.gcs_port}")
+        self.gcs = MissionClient(self.gcs_url)
         deadline = time.monotonic() + GCS_CONNECT_TIMEOUT_S
         while True:
             self._check_children()

@@ -67,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
         t.add_row("elapsed", f"sim {p.elapsed_sim_s:.1f} s, wall {p.elapsed_wall_s:.1f} s")
         t.add_row("collisions", str(p.collisions))
         t.add_row("status", p.last_text or "-")
+        if p.gcs_url:
+            t.add_row("watch with", f"mavproxy.py --master {p.gcs_url}")
         return t
 
     try:
