@@ -168,6 +168,11 @@ class EstimatorParams:
     """Longitudinal slip as a fraction of wheel speed, 1-sigma, added to the floor."""
     lateral_slip_per_sqrt_s: float = 0.03
     """Skid of the body sideways and along track not seen by wheels or gyro, m/sqrt(s)."""
+    wheel_scale_sigma0: float = 0.03
+    """Uncertainty of the wheel scale (encoder metres per metre travelled) at start: tyre size
+    and wear, 1-sigma as a fraction."""
+    wheel_scale_walk_per_sqrt_s: float = 0.0005
+    """How fast the wheel scale may change (ground, load), 1/sqrt(s)."""
     wheel_max_speed_mps: float = 5.0
     """A wheel delta faster than this is a counter reset or a glitch: re-baseline, do not fuse."""
     gps_min_sigma_m: float = 0.5
