@@ -4,26 +4,29 @@ No I/O: the filter takes typed readings (``rover_ctl.readings``) stamped with ve
 returns a ``Pose`` in the local ENU frame (``rover_ctl.geo.LocalFrame``). docs/estimator.md has
 the derivation, the tuning and the measured figures.
 
-State ``x = [e, n, psi, v, b, c]``: east and north (m), ENU heading (rad, 0 east, CCW), speed
-along the heading (m/s, negative when reversing), the gyro bias (rad/s, ENU sense) and the
+State ``x = [e, n, psi, v, b, c, k]``: east and north (m), ENU heading (rad, 0 east, CCW),
+speed along the heading (m/s, negative when reversing), the gyro bias (rad/s, ENU sense), the
 compass offset (rad: what the compass reads minus the true heading, a calibration residue of a
-few degrees that only the GPS course can reveal).
+few degrees that only the GPS course can reveal) and the wheel scale (what the encoders count
+per metre travelled: tyre radius error, wear, longitudinal slip on soft ground).
 
 Motion model over ``dt`` with the latest gyro rate ``g`` (ENU) and ``w = g - b``, integrated at
 the mid-point heading ``m = psi + w dt / 2``::
 
     e'   = e + v dt cos m          psi' = psi + w dt
-    n'   = n + v dt sin m          v'   = v,   b' = b,   c' = c
+    n'   = n + v dt sin m          v'   = v,   b' = b,   c' = c,   k' = k
 
 When no ATTITUDE came for ``attitude_timeout_s`` the turn rate is taken from the wheels instead,
-``w = (d_right - d_left) / track / dt``: a skid-steer rover slips sideways in turns, so this
+``w = (d_right - d_left) / (k track dt)``: a skid-steer rover slips sideways in turns, so this
 over-estimates the rate and is only a fallback. The process noise is
-``Q = diag(s_lat^2, s_lat^2, s_gyro^2, s_acc^2, s_bias^2, s_comp^2) * dt`` (random walks:
-sideways skid, gyro angle noise, speed change, gyro bias and compass offset wander).
-Measurements, all linear:
+``Q = diag(s_lat^2, s_lat^2, s_gyro^2, s_acc^2, s_bias^2, s_comp^2, s_k^2) * dt`` (random
+walks: sideways skid, gyro angle noise, speed change, gyro bias, compass offset and wheel scale
+wander). Measurements (all linear but the wheels'):
 
 * wheels: ``z = (d_left + d_right) / 2 / dt`` of two successive cumulative WHEEL_DISTANCE
-  readings measures ``v``, with ``sigma = floor + slip * |z|``;
+  readings measures ``k v`` (H = [.., k, .., v]), with ``sigma = floor + slip * |z|``; the GPS
+  speed and positions make ``k`` observable, which is what keeps dead reckoning honest when the
+  tyres are not the size the encoders assume;
 * compass (ATTITUDE yaw, NED -> ENU): measures ``psi + c``; the residual is wrapped to
   [-pi, pi);
 * GPS: ``(e, n)`` of the fix measures the position with ``sigma = max(eph, floor)``;
@@ -35,7 +38,7 @@ Measurements, all linear:
 
 Why an EKF and not a UKF: the only nonlinearity is the heading in the position update, which is
 mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF with the exact
-Jacobian costs one 5x5 covariance product per reading, the UKF eleven sigma points and an angle-
+Jacobian costs one 7x7 covariance product per reading, the UKF fifteen sigma points and an angle-
 aware mean, for no accuracy a rover can see.
 
 GPS gating and recovery: a fix is fused only if its innovation's Mahalanobis distance
@@ -69,8 +72,8 @@ from rover_ctl.config import EstimatorParams
 from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
 from rover_ctl.readings import Attitude, GpsFix, WheelDistance
 
-E, N, PSI, V, BIAS, COMPASS = range(6)
-_DIM = 6
+E, N, PSI, V, BIAS, COMPASS, SCALE = range(7)
+_DIM = 7
 
 
 class GpsVerdict(enum.Enum):
@@ -119,7 +122,7 @@ class _RoverEkf(ExtendedKalmanFilter):
 
 
 def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndarray, np.ndarray]:
-    """State ``x`` (6x1) propagated ``dt_s`` with the gyro rate ``gyro_radps`` (ENU), and the
+    """State ``x`` (7x1) propagated ``dt_s`` with the gyro rate ``gyro_radps`` (ENU), and the
     Jacobian ``F = d x' / d x``."""
     psi, v, bias = float(x[PSI, 0]), float(x[V, 0]), float(x[BIAS, 0])
     w = gyro_radps - bias
@@ -151,7 +154,19 @@ def _linear(*rows: tuple[int, ...]):
 _H_POS, _HX_POS = _linear((E,), (N,))
 _H_PSI, _HX_PSI = _linear((PSI,))
 _H_COMPASS, _HX_COMPASS = _linear((PSI, COMPASS))
-_H_V, _HX_V = _linear((V,))
+
+
+def _h_wheels(x: np.ndarray) -> np.ndarray:
+    """Jacobian of the wheel speed ``k v``."""
+    h = np.zeros((1, _DIM))
+    h[0, V] = x[SCALE, 0]
+    h[0, SCALE] = x[V, 0]
+    return h
+
+
+def _hx_wheels(x: np.ndarray) -> np.ndarray:
+    return np.array([[x[SCALE, 0] * x[V, 0]]])
+
 _H_PSI_V, _HX_PSI_V = _linear((PSI,), (V,))
 
 
@@ -247,7 +262,7 @@ class PoseEstimator:
         if not self._advance(r.time_s):
             return
         sigma = self.params.wheel_speed_sigma_mps + self.params.wheel_slip_fraction * abs(speed_mps)
-        self._kf.update(np.array([[speed_mps]]), _H_V, _HX_V, R=np.array([[sigma * sigma]]))
+        self._kf.update(np.array([[speed_mps]]), _h_wheels, _hx_wheels, R=np.array([[sigma * sigma]]))
 
     def on_attitude(self, r: Attitude) -> None:
         """Gyro rate for the prediction from now on, and the compass heading as a measurement."""
@@ -356,6 +371,7 @@ class PoseEstimator:
                 p.speed_accel_per_sqrt_s**2,
                 p.gyro_bias_walk_radps_per_sqrt_s**2,
                 p.compass_offset_walk_rad_per_sqrt_s**2,
+                p.wheel_scale_walk_per_sqrt_s**2,
             ]
         ) * dt_s
         self._kf.predict(u=(dt_s, self._rate_input_radps(time_s)))
@@ -367,14 +383,14 @@ class PoseEstimator:
         (the model subtracts the bias, which only the gyro has)."""
         if time_s - self._last_attitude_s <= self.params.attitude_timeout_s:
             return self._gyro_radps
-        return self._wheel_turn_radps + float(self._kf.x[BIAS, 0])
+        return self._wheel_turn_radps / float(self._kf.x[SCALE, 0]) + float(self._kf.x[BIAS, 0])
 
     def _try_initialise(self) -> None:
         if self._pending_fix is None or self._pending_heading is None:
             return
         east_m, north_m, sigma_m = self._pending_fix
         p = self.params
-        self._kf.x = np.array([[east_m], [north_m], [self._pending_heading], [0.0], [0.0], [0.0]])
+        self._kf.x = np.array([[east_m], [north_m], [self._pending_heading], [0.0], [0.0], [0.0], [1.0]])
         # Speed unknown until the next wheel reading: any plausible speed. The heading is the
         # compass reading, so its error is the unknown offset (plus noise) and the offset's
         # error is minus that offset: correlated -1.
@@ -387,6 +403,7 @@ class PoseEstimator:
                 p.wheel_max_speed_mps**2,
                 p.gyro_bias_sigma0_radps**2,
                 offset_var,
+                p.wheel_scale_sigma0**2,
             ]
         )
         self._kf.P[PSI, COMPASS] = self._kf.P[COMPASS, PSI] = -offset_var

@@ -35,6 +35,8 @@ class Sensors:
     gyro_noise_rad_per_sqrt_s: float = 0.003
     gyro_bias_radps: float = 0.01
     wheel_speed_sigma_mps: float = 0.03
+    wheel_scale: float = 1.0
+    """Encoder metres per metre travelled (tyres not the size the encoders assume)."""
     lateral_slip_per_sqrt_s: float = 0.03
     gps_period_s: float = 0.2
     imu_period_s: float = 0.02
@@ -94,9 +96,9 @@ def simulate(
             north[k] = north[k - 1] + v * dt * math.sin(mid) + slip[1]
             heading[k] = wrap_pi(heading[k - 1] + w * dt)
             bias[k] = decay * bias[k - 1] + rng.normal(0.0, s.gps_bias_m * math.sqrt(1.0 - decay * decay), 2)
-            wheel_v = v + rng.normal(0.0, s.wheel_speed_sigma_mps)
-            left += (wheel_v - 0.5 * w * TRACK_M) * dt
-            right += (wheel_v + 0.5 * w * TRACK_M) * dt
+            wheel_v = s.wheel_scale * v + rng.normal(0.0, s.wheel_speed_sigma_mps)
+            left += wheel_v * dt - s.wheel_scale * 0.5 * w * TRACK_M * dt
+            right += wheel_v * dt + s.wheel_scale * 0.5 * w * TRACK_M * dt
             gyro = w + s.gyro_bias_radps + rng.normal(0.0, s.gyro_noise_rad_per_sqrt_s / math.sqrt(dt))
         else:
             gyro = turn_radps(0.0) + s.gyro_bias_radps

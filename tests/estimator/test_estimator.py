@@ -312,13 +312,13 @@ def test_gps_on_another_clock_is_ignored_and_a_reboot_starts_over():
 
 
 def test_motion_model_jacobian_matches_finite_differences():
-    x = np.array([[3.0], [-2.0], [2.9], [1.4], [0.02], [0.05]])
+    x = np.array([[3.0], [-2.0], [2.9], [1.4], [0.02], [0.05], [1.03]])
     dt_s, gyro = 0.3, 0.4
     _, jac = motion_model(x, dt_s, gyro)
     step = 1e-6
-    numeric = np.zeros((6, 6))
-    for j in range(6):
-        dx = np.zeros((6, 1))
+    numeric = np.zeros((7, 7))
+    for j in range(7):
+        dx = np.zeros((7, 1))
         dx[j] = step
         plus, _ = motion_model(x + dx, dt_s, gyro)
         minus, _ = motion_model(x - dx, dt_s, gyro)
@@ -346,3 +346,15 @@ def test_without_wheel_encoders_gps_velocity_keeps_the_speed():
     assert float(np.sqrt(np.mean(np.square(speed_errors)))) < 0.15
     assert rec.position_rms_m() < 0.5 * gps_rms_m(run)
     assert all(p.healthy for p in converged)
+
+
+def test_wheel_scale_error_is_learnt_before_an_outage():
+    """Tyres 6 % larger than the encoders assume: dead reckoning would drift 6 % of the distance;
+    the scale learnt from GPS before the outage keeps it under 2 %."""
+    sensors = Sensors(wheel_scale=1.06, outages=[(60.0, 70.0)])
+    run = simulate(70.0, lambda t: 1.5, lambda t: 0.05, seed=23, sensors=sensors)
+    estimator, rec, _ = run_filter(run)
+    t, err, _ = rec.arrays(0.0)
+    start, end = int(round(60.0 / 0.02)), len(t) - 1
+    assert float(np.hypot(*(err[end] - err[start]))) < 0.02 * 1.5 * 10.0
+    assert estimator.pose().speed_mps == pytest.approx(1.5, abs=0.05)
