@@ -32,12 +32,12 @@ FAULT_PARAMS: dict[str, tuple[float, str]] = {
     "SIM_RF_FAIL": (0.0, "bitmask of rangefinder ids that go silent"),
     "SIM_RF_STUCK": (0.0, "bitmask of rangefinder ids that repeat their last reading"),
     "SIM_WHEEL_SLIP": (0.0, "fraction 0..1 of the wheels' rolling lost to slip (encoders over-read)"),
-    "SIM_LINK_LOSS_PCT": (0.0, "percentage 0..100 of MAVLink messages dropped, both directions"),
+    "SIM_LINK_LOSS": (0.0, "percentage 0..100 of MAVLink messages dropped, both directions"),
     "SIM_LINK_QUIET": (0.0, "1: the vehicle stops sending anything"),
 }
 
 _MASKS = ("SIM_RF_FAIL", "SIM_RF_STUCK")
-_RANGES = {"SIM_WHEEL_SLIP": (0.0, 1.0), "SIM_LINK_LOSS_PCT": (0.0, 100.0)}
+_RANGES = {"SIM_WHEEL_SLIP": (0.0, 1.0), "SIM_LINK_LOSS": (0.0, 100.0)}
 
 # Scheduled fault name -> (its required members, function of the members -> SIM_* values).
 _SCHEDULED = {
@@ -47,7 +47,7 @@ _SCHEDULED = {
     "rangefinder_stuck": (("sensor_id",), lambda p: {"SIM_RF_STUCK": float(1 << int(p["sensor_id"]))}),
     "wheel_slip": (("fraction",), lambda p: {"SIM_WHEEL_SLIP": p["fraction"]}),
     "link_quiet": ((), lambda p: {"SIM_LINK_QUIET": 1.0}),
-    "link_loss": (("pct",), lambda p: {"SIM_LINK_LOSS_PCT": p["pct"]}),
+    "link_loss": (("pct",), lambda p: {"SIM_LINK_LOSS": p["pct"]}),
 }
 SCHEDULED_FAULTS = tuple(_SCHEDULED)
 
@@ -176,7 +176,7 @@ class FaultState:
 
     @property
     def link_loss_pct(self) -> float:
-        return self.values["SIM_LINK_LOSS_PCT"]
+        return self.values["SIM_LINK_LOSS"]
 
     @property
     def link_quiet(self) -> bool:

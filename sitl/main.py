@@ -166,7 +166,7 @@ class Emulator:
 
     # ---- link ----------------------------------------------------------------------------
     def _lost(self, endpoint: Endpoint, outgoing: bool) -> bool:
-        """Whether a controller-link message is lost to the SIM_LINK_* faults. SIM_LINK_LOSS_PCT drops
+        """Whether a controller-link message is lost to the SIM_LINK_* faults. SIM_LINK_LOSS drops
         both ways, SIM_LINK_QUIET silences the vehicle only (so a PARAM_SET can end it); the
         lockstep marker and its answer are never lost (callers skip TIMESYNC)."""
         if endpoint is not self.controller:

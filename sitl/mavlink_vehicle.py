@@ -37,7 +37,7 @@ THROTTLE_CHANNEL = 2
 """Zero-based RC channel indexes: ch1 steering, ch3 throttle (ArduPilot Rover defaults)."""
 STATUSTEXT_MAX_CHARS = 50
 PARAM_ID_CHARS = 16
-"""MAVLink param_id length: longer names (SIM_LINK_LOSS_PCT) travel cut to 16 characters."""
+"""MAVLink param_id length; every parameter name here fits (a test checks it)."""
 
 # Streams of ArduPilot's REQUEST_DATA_STREAM (GCS_MAVLINK stream groups, restricted to what we send).
 DATA_STREAMS = {

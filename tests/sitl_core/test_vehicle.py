@@ -168,7 +168,7 @@ def test_run_time_faults_combine_with_the_schedule():
     assert {s.sensor_id for s in rover.rangefinders()} == {2, 3, 4, 5}
     rover.step(1.0)
     assert {s.sensor_id for s in rover.rangefinders()} == {0, 2, 3, 4, 5}
-    rover.set_fault("SIM_LINK_LOSS_PCT", 12.5)
+    rover.set_fault("SIM_LINK_LOSS", 12.5)
     rover.set_fault("SIM_LINK_QUIET", 1)
     assert rover.faults.link_loss_pct == 12.5 and rover.faults.link_quiet
     rover.set_fault("SIM_GPS_DISABLE", 1)
@@ -229,3 +229,9 @@ def test_fault_windows_off_the_substep_grid_still_fire():
     events = [(e.detail["name"], e.detail["active"], round(e.time_s, 4)) for e in rover.step(1.0)]
     assert events == [("gps_outage", True, 0.0), ("gps_outage", False, 0.003),
                       ("link_quiet", True, 0.3), ("link_quiet", False, 0.6)]
+
+
+def test_fault_parameter_names_fit_a_mavlink_param_id():
+    from sitl.faults import FAULT_PARAMS
+
+    assert all(len(name) <= 16 for name in FAULT_PARAMS), "MAVLink param_id carries at most 16 characters"

@@ -142,7 +142,7 @@ def test_speedup_runs_free_and_sigterm_exits_cleanly(tmp_path, udp_port: int) ->
 
 
 def test_link_loss_fault_thins_telemetry_but_not_the_lockstep_marker() -> None:
-    with rover_sitl("--lockstep", "--param", "SIM_LINK_LOSS_PCT=50") as sitl:
+    with rover_sitl("--lockstep", "--param", "SIM_LINK_LOSS=50") as sitl:
         client = lockstep_client(sitl.url)
         received = collect(client, 4.0)
         client.set_param("SIM_LINK_QUIET", 1)  # may itself be lost: resend until quiet

@@ -151,14 +151,14 @@ def test_message_intervals_and_streams(client) -> None:
 def test_params_and_gps_disable_fault(client) -> None:
     client.conn.mav.param_request_list_send(1, 1)
     names = {p.param_id for p in of_type(collect(client, 0.2), "PARAM_VALUE")}
-    assert {"SYSID_MYGCS", "RC_OVERRIDE_TIME", "SIM_GPS_DISABLE", "SIM_LINK_LOSS_PC"} <= names  # 16-char ids
+    assert {"SYSID_MYGCS", "RC_OVERRIDE_TIME", "SIM_GPS_DISABLE", "SIM_LINK_LOSS"} <= names
     assert all(g.fix_type >= 3 for g in of_type(collect(client, 1.0), "GPS_RAW_INT")[1:])
     client.set_param("SIM_GPS_DISABLE", 1)
     received = collect(client, 1.0)
     assert [p.param_value for p in of_type(received, "PARAM_VALUE")] == [1.0]
     assert any("SIM_GPS_DISABLE" in t.text for t in of_type(received, "STATUSTEXT"))
     assert all(g.fix_type < 3 for g in of_type(collect(client, 1.0), "GPS_RAW_INT"))
-    client.set_param("SIM_LINK_LOSS_PCT", 250)  # out of range: refused, value unchanged
+    client.set_param("SIM_LINK_LOSS", 250)  # out of range: refused, value unchanged
     received = collect(client, 0.2)
     assert [p.param_value for p in of_type(received, "PARAM_VALUE")] == [0.0]
 
