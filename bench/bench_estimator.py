@@ -8,9 +8,10 @@ Per scenario, over seeded runs (after ``WARMUP_S``):
   bias part (from the emulator's truth log: the slowly wandering error no filter can remove
   without another absolute reference);
 - heading RMS error;
-- with scheduled faults: a 39 m GPS glitch for 4 s (``gps_glitch``), the share of glitched fixes
-  rejected and the largest error meanwhile; a 10 s GPS outage (``gps_outage``), the drift over
-  it, i.e. the change of the position error vector, as % of the distance travelled meanwhile.
+- with scheduled faults: 5 % wheel slip throughout (``wheel_slip``); a 39 m GPS glitch for 4 s
+  (``gps_glitch``): the share of glitched fixes rejected and the largest error meanwhile; a 10 s
+  GPS outage (``gps_outage``): the drift over it, i.e. the change of the position error vector,
+  as % of the distance travelled meanwhile.
 
 Scenarios: ``default`` is the emulator's realistic receiver (0.5 m white + 1.0 m bias per axis,
 tau 120 s); ``white`` is mostly white noise (2.5 m white, 0.3 m bias). The emulator has no flag
@@ -50,7 +51,11 @@ GLITCH_START_S = 25.0
 GLITCH_S = 4.0
 """Shorter than the estimator's glitch_reset_s: the whole glitch should be rejected."""
 GLITCH_EAST_M, GLITCH_NORTH_M = 25.0, 30.0
+WHEEL_SLIP = 0.05
+"""Throughout the faults scenario the ground moves 5 % less than the wheels roll (a wheel scale
+error the estimator must learn before the outage, or dead reckoning drifts 5 % of distance)."""
 FAULTS = [
+    {"name": "wheel_slip", "start_s": 0.0, "duration_s": 1e6, "fraction": WHEEL_SLIP},
     {"name": "gps_glitch", "start_s": GLITCH_START_S, "duration_s": GLITCH_S, "north_m": GLITCH_NORTH_M,
      "east_m": GLITCH_EAST_M},
     {"name": "gps_outage", "start_s": OUTAGE_START_S, "duration_s": OUTAGE_S},
@@ -244,7 +249,7 @@ def run(quick: bool) -> dict:
     models = {
         "default": "0.5 m white + 1.0 m bias (tau 120 s)",
         "white": "2.5 m white + 0.3 m bias",
-        "faults": f"default; glitch {GLITCH_START_S:g}-{GLITCH_START_S + GLITCH_S:g} s, "
+        "faults": f"default; wheel slip {WHEEL_SLIP:.0%}, glitch {GLITCH_START_S:g}-{GLITCH_START_S + GLITCH_S:g} s, "
                   f"outage {OUTAGE_START_S:g}-{OUTAGE_START_S + OUTAGE_S:g} s (raw GPS RMS includes the glitch)",
     }
     for name, s in scenarios.items():
