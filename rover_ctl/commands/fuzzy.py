@@ -30,14 +30,14 @@ def add_parser(subparsers) -> None:
     names = ", ".join(shipped())
 
     evaluate = sub.add_parser("eval", help="evaluate a rule base on the rows of a CSV")
-    evaluate.add_argument("--rulebase", required=True, metavar="NAME|FILE", help=f"shipped ({names}) or a .toml file")
+    evaluate.add_argument("--rulebase", required=True, metavar="NAME|FILE", help=f"shipped ({names}) or a .toml or .fcl file")
     evaluate.add_argument("--input", metavar="CSV", help="input rows (default stdin)")
     evaluate.add_argument("--output", metavar="CSV", help="where to write (default stdout)")
     evaluate.add_argument("--explain", action="store_true", help="add a column with the rules that fired")
     evaluate.set_defaults(func=cmd_eval)
 
     show = sub.add_parser("show", help="print a rule base's variables and rule summary")
-    show.add_argument("rulebase", metavar="NAME|FILE", help=f"shipped ({names}) or a .toml file")
+    show.add_argument("rulebase", metavar="NAME|FILE", help=f"shipped ({names}) or a .toml or .fcl file")
     show.add_argument("--plot", metavar="FILE.png", help="draw the membership functions to this image")
     show.set_defaults(func=cmd_show)
 
