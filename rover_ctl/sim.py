@@ -108,6 +108,8 @@ class Progress:
     collisions: int = 0
     mode: int = MODE_HOLD
     armed: bool = False
+    system_status: int = 0
+    """MAV_STATE of the daemon's heartbeat (CRITICAL while a failsafe holds)."""
     complete: bool = False
     last_text: str = ""
     texts: list[str] = field(default_factory=list)
@@ -354,6 +356,7 @@ class SimRun:
         if kind == "HEARTBEAT":
             p.mode = msg.custom_mode
             p.armed = bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            p.system_status = msg.system_status
         elif kind == "GLOBAL_POSITION_INT":
             p.sim_time_s = msg.time_boot_ms / 1000.0
             if self.frame is not None:

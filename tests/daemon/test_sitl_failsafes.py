@@ -14,6 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 LOOP = ROOT / "missions" / "cmac_loop.waypoints"
 
 pytestmark = pytest.mark.sitl
+MAV_STATE_CRITICAL = 5
 
 OVERRIDES = [
     "failsafe.gcs_timeout_s=1.0",
@@ -110,7 +111,11 @@ def test_unhealthy_estimator_holds(tmp_path):
     with SimRun(options) as run:
         run.arm()
         run.start_mission()
-        assert said(run, "FS estimator: unhealthy, hold")
+        # The failsafe may trigger before our first heartbeat reaches the daemon (its STATUSTEXT is
+        # then lost): the heartbeat's system status says it continuously.
+        assert run.wait_for(lambda p: p.system_status == MAV_STATE_CRITICAL, wall_timeout_s=5.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=4.0) is False
+    reasons = {r for e in read_jsonl(out / "events.jsonl") if e["type"] == "failsafe" for r in e["reasons"]}
+    assert "estimator" in reasons
     states = [r for r in read_jsonl(out / "truth.jsonl") if r["type"] == "state"]
     assert max(abs(s["speed_mps"]) for s in states) < 0.05

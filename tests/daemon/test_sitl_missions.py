@@ -83,7 +83,10 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
         assert run.set_mode(MODE_RTL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
         home = LocalFrame(*HOME)
-        assert run.wait_for(lambda p: p.position_en is not None and math.dist(p.position_en, (0, 0)) < 2.0, sim_timeout_s=60.0)
+        # Home is reached within rtl_radius_m (2 m) of the daemon's home, its first GPS fix, by its
+        # estimate: each of the two is about a metre off the truth.
+        near_home_m = 4.0
+        assert run.wait_for(lambda p: p.position_en is not None and math.dist(p.position_en, (0, 0)) < near_home_m, sim_timeout_s=60.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # settles at home
 
     events = read_jsonl(out / "events.jsonl")
@@ -94,5 +97,5 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     assert max(before) > 0.5  # it was driving
     assert max(abs(v) for v in after) < 0.05  # and stood still from 0.5 s of sim time after HOLD
     last = states[-1]
-    assert math.dist(home.to_enu(last["lat_deg"], last["lon_deg"]), (0.0, 0.0)) < 2.5
+    assert math.dist(home.to_enu(last["lat_deg"], last["lon_deg"]), (0.0, 0.0)) < near_home_m
     assert abs(last["speed_mps"]) < 0.05
