@@ -18,6 +18,7 @@ link housekeeping (heartbeats, command retries, silence detection).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -35,6 +36,9 @@ mavlink = mavutil.mavlink
 UINT16_MAX = 65535
 RC_RELEASE = 0
 """RC_CHANNELS_OVERRIDE channels 1-8: 0 hands the channel back to the radio, UINT16_MAX leaves it."""
+EPOCH_THRESHOLD_US = 10**15
+"""A time_usec above this (31 years of uptime) is UNIX epoch time, not time since boot; the MAVLink
+spec lets the receiver tell the two apart by magnitude."""
 RANGE_CAPPED_CM = 65535
 """What rangefinders report for "nothing seen"; 0 is also used while a sensor starts."""
 
@@ -81,15 +85,6 @@ class StatusText:
     time_s: float
     severity: int
     text: str
-
-
-@dataclass(frozen=True)
-class ServoOutput:
-    """SERVO_OUTPUT_RAW: the vehicle's mixed motor PWM (servo1 left, servo3 right)."""
-
-    time_s: float
-    left_us: int
-    right_us: int
 
 
 @dataclass(frozen=True)
@@ -265,12 +260,11 @@ class VehicleLink:
             if msg.count < 2:
                 self.garbage_frames += 1
                 return None
-            self._advance(msg.time_usec / 1e6)
-            return WheelDistance(time_s=msg.time_usec / 1e6, left_m=msg.distance[0], right_m=msg.distance[1])
+            time_s = self._boot_time_s(msg.time_usec)
+            return WheelDistance(time_s=time_s, left_m=msg.distance[0], right_m=msg.distance[1])
         if kind == "GPS_RAW_INT":
-            self._advance(msg.time_usec / 1e6)
             self.last_gps_msg = msg
-            return decode_gps(msg)
+            return dataclasses.replace(decode_gps(msg), time_s=self._boot_time_s(msg.time_usec))
         if kind == "SYS_STATUS":
             return Battery(msg.voltage_battery / 1000.0, msg.battery_remaining)
         if kind == "DISTANCE_SENSOR":
@@ -278,13 +272,19 @@ class VehicleLink:
             return decode_range(msg, msg.time_boot_ms / 1000.0)
         if kind == "SIMSTATE":
             return Truth(self.vehicle_time_s, msg.lat / 1e7, msg.lng / 1e7, msg.yaw)
-        if kind == "SERVO_OUTPUT_RAW":
-            return ServoOutput(msg.time_usec / 1e6, msg.servo1_raw, msg.servo3_raw)
         if kind == "STATUSTEXT":
             return StatusText(self.vehicle_time_s, msg.severity, msg.text)
         if kind == "COMMAND_ACK":
             return self._on_ack(msg)
         return None
+
+    def _boot_time_s(self, time_usec: int) -> float:
+        """Vehicle (boot) time of a time_usec field: epoch stamps (a real GPS) are replaced by the
+        arrival time on the vehicle clock, so one clock drives everything."""
+        if time_usec >= EPOCH_THRESHOLD_US:
+            return self.vehicle_time_s
+        self._advance(time_usec / 1e6)
+        return time_usec / 1e6
 
     def _advance(self, time_s: float, alive: bool = True) -> None:
         if time_s > self.vehicle_time_s:

@@ -94,6 +94,15 @@ def test_sensor_messages_decode_to_readings(pair):
     assert link.vehicle_time_s == pytest.approx(2.56)
 
 
+def test_epoch_gps_time_is_put_on_the_vehicle_clock(pair):
+    """A real GPS may stamp GPS_RAW_INT with UNIX time: the link uses the arrival time instead."""
+    link, vehicle, _ = pair
+    vehicle.mav.attitude_send(7000, 0, 0, 0.0, 0, 0, 0.0)
+    vehicle.mav.gps_raw_int_send(1_763_800_000_000_000, 3, -353632610, 1491652300, 584000, 120, 65535, 0, 0, 10)
+    fix = drain(link, GpsFix)
+    assert fix.time_s == 7.0 and link.vehicle_time_s == 7.0
+
+
 def test_garbage_is_counted_and_skipped(pair):
     link, vehicle, _ = pair
     vehicle.write(b"\xfd\x09\x00\x00\x07\x01\x01\x00\x00\x00garbage-bytes-that-are-no-frame")
