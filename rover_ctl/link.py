@@ -232,6 +232,8 @@ class VehicleLink:
             return None
         if msg.get_srcSystem() == self.params.source_system:
             return None  # our own frames echoed by a broadcast medium
+        if self.vehicle is not None and msg.get_srcSystem() != self.target_system:
+            return None  # another system on a shared link (a second GCS, a companion computer)
         self.frames_received += 1
         if kind == "TIMESYNC":
             # Lockstep markers keep coming from an emulator whose vehicle side went quiet: they
@@ -243,8 +245,8 @@ class VehicleLink:
         self.last_rx_wall_s = self._wall()
         self.last_rx_vehicle_s = self.vehicle_time_s
         if kind == "HEARTBEAT":
-            if msg.type == mavlink.MAV_TYPE_GCS:
-                return None
+            if msg.type == mavlink.MAV_TYPE_GCS or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
+                return None  # a ground station or a peripheral component, not the autopilot
             self.target_system, self.target_component = msg.get_srcSystem(), msg.get_srcComponent()
             self.vehicle = VehicleStatus(
                 wall_s=self.last_rx_wall_s,
