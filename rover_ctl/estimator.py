@@ -47,16 +47,15 @@ its covariance grows and a real drift is soon accepted again; a disagreement sus
 ``glitch_reset_s`` resets the position to the GPS (EKF3's GLITCH_RAD rule), since then it is more
 likely the filter that is wrong.
 
-Time: each reading carries vehicle time; ATTITUDE and WHEEL_DISTANCE drive the filter's clock
-(GPS does not: a fix stamped more than ``gps_max_lead_s`` ahead of it, such as a UNIX-epoch
-stamp, is ignored; a reading more than ``clock_restart_s`` behind it means the vehicle rebooted,
-and the filter starts over). A reading newer than the filter's time predicts the
-filter forward to it and is then fused. A reading up to ``max_lag_s`` older than the filter's
-time (streams interleave: GPS is stamped before the wheel reading of the same frame arrives) is
-fused at the filter's time, shifted by the motion over the lag (GPS by ``v * lag`` along the
-heading, compass by ``w * lag``). A reading no newer than the last one of its own stream is a
-duplicate or arrived out of order and is dropped; wheel distances are cumulative, so the next
-reading's delta covers a dropped one.
+Time: each reading carries vehicle time. ATTITUDE and WHEEL_DISTANCE drive the filter's clock:
+a reading newer than the filter's time predicts the filter forward to it and is then fused. A
+reading up to ``max_lag_s`` older (streams interleave: a fix may arrive after a newer wheel
+reading) is fused at the filter's time, shifted by the motion over the lag (GPS by ``v * lag``
+along the heading, compass and course by ``w * lag``); older ones are dropped. A reading no newer
+than the last one of its own stream is a duplicate or out of order and is dropped; wheel
+distances are cumulative, so the next delta covers a dropped one. GPS never moves the clock far:
+a fix stamped more than ``gps_max_lead_s`` ahead (a UNIX-epoch stamp) is ignored. A reading more
+than ``clock_restart_s`` behind the filter means the vehicle rebooted: the filter starts over.
 """
 
 from __future__ import annotations
