@@ -235,8 +235,7 @@ class Daemon:
         self._send_telemetry()
         if not items:
             fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
-            if fds:
-                select.select(fds, [], [], self.params.idle_wait_s)
+            select.select(fds, [], [], self.params.idle_wait_s)
 
     def _on_item(self, item: Any) -> None:
         if isinstance(item, WheelDistance):
@@ -500,6 +499,7 @@ class Daemon:
         if age_s <= self.config.failsafe.vehicle_timeout_s:
             return
         pose = self.estimator.pose() if self.estimator and self.estimator.initialised else None
+        self.commanded_speed_mps = 0.0  # nothing is being driven: not a stuck rover
         decision = self._failsafe(link.vehicle_time_s + age_s, pose, vehicle_age_s=age_s)
         if decision.action == Action.NEUTRAL and time.monotonic() >= self._silent_neutral_wall_s:
             self._silent_neutral_wall_s = time.monotonic() + self.period_s

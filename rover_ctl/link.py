@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import select
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -162,6 +163,7 @@ class VehicleLink:
         *,
         command_timeout_s: float = 0.5,
         command_retries: int = 3,
+        reconnect_period_s: float = 1.0,
         conn: Any = None,
         wall: Callable[[], float] = time.monotonic,
     ):
@@ -179,6 +181,14 @@ class VehicleLink:
             )
         except Exception as exc:  # pymavlink raises bare OSError/SerialException/ValueError
             raise LinkError(f"vehicle link {url!r}: cannot open: {exc}") from None
+        if hasattr(self.conn, "reconnect_delay"):
+            # A TCP peer that went away is reconnected by pymavlink inside recv/write; one quick
+            # attempt each time, never its default sleep-and-retry, which would stall the loop.
+            self.conn.retries, self.conn.reconnect_delay = 0, 0.0
+        self.link_error: str | None = None
+        """Why the connection is down (None while it works); reads are retried every reconnect_period_s."""
+        self.reconnect_period_s = reconnect_period_s
+        self._retry_wall_s = 0.0
         self.url = url
         self.target_system = 1
         self.target_component = 1
@@ -200,24 +210,40 @@ class VehicleLink:
     # ---- receiving -------------------------------------------------------------------------
 
     def fileno(self) -> int | None:
-        return getattr(self.conn, "fd", None)
+        """The connection's current descriptor (a reconnected TCP link has a new one), or None."""
+        port = getattr(self.conn, "port", None)
+        try:
+            return port.fileno() if port is not None else None
+        except (AttributeError, OSError, ValueError):
+            return None
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until the link has bytes or ``timeout_s`` (wall) passes."""
-        self.conn.select(timeout_s)
+        fd = self.fileno()
+        if fd is None:
+            time.sleep(timeout_s)  # nothing to wait on while the connection is down
+            return
+        select.select([fd], [], [], timeout_s)
 
     def poll(self, max_frames: int = 10_000, stop_at_marker: bool = True) -> list[Any]:
         """Decoded items received so far (non-blocking). Stops after a lockstep marker when
         ``stop_at_marker`` so that a frame's control step sees exactly that frame's data."""
         items, self._held = self._held, []
+        if self.link_error is not None and self._wall() < self._retry_wall_s:
+            return items
         for _ in range(max_frames):
             try:
                 msg = self.conn.recv_msg()
+            except OSError as exc:  # the connection itself failed (peer gone, port vanished)
+                self.link_error = str(exc) or type(exc).__name__
+                self._retry_wall_s = self._wall() + self.reconnect_period_s
+                break
             except Exception:  # a frame pymavlink could not unpack
                 self.garbage_frames += 1
                 continue
             if msg is None:
                 break
+            self.link_error = None
             item = self._decode(msg)
             if item is not None:
                 items.append(item)
@@ -416,5 +442,5 @@ class VehicleLink:
     def close(self) -> None:
         try:
             self.conn.close()
-        except OSError:
+        except (OSError, AttributeError):  # pymavlink's TCP close fails when already disconnected
             pass

@@ -119,3 +119,20 @@ def test_unhealthy_estimator_holds(tmp_path):
     assert "estimator" in reasons
     states = [r for r in read_jsonl(out / "truth.jsonl") if r["type"] == "state"]
     assert max(abs(s["speed_mps"]) for s in states) < 0.05
+
+
+def test_vehicle_gone_is_detected_on_the_wall_clock(tmp_path):
+    """The emulator dies (its socket closes, no lockstep markers either): the daemon cannot measure
+    the silence in vehicle time, so it does on the wall clock, and keeps serving the GCS."""
+    out = tmp_path / "run"
+    with SimRun(SimOptions(mission=ROOT / "missions" / "cmac_jump.waypoints", out=out, timeout_s=60.0)) as run:
+        run.arm()
+        run.start_mission()
+        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
+        run.sitl.kill()
+        run.sitl.wait()
+        run.sitl = None
+        assert said(run, "FS vehicle link: motors neutral", sim_timeout_s=None, wall_timeout_s=5.0)
+        assert run.wait_for(lambda p: p.system_status == MAV_STATE_CRITICAL, wall_timeout_s=3.0)
+        assert run.daemon.poll() is None
+    assert not any(t.startswith("FS stuck") for t in run.progress.texts)
