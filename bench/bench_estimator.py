@@ -24,17 +24,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
-import socket
-import subprocess
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from bench.lockstep_client import LockstepClient
+from bench.lockstep_client import LockstepClient, sitl_process
 from rover_ctl.config import EstimatorParams, RobotParams
 from rover_ctl.estimator import GpsVerdict, PoseEstimator
 from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
@@ -64,14 +60,6 @@ READY_TIMEOUT_S = 20.0
 GOALS = {"white_ratio": 0.40, "bias_margin": 1.15, "heading_deg": 3.0, "drift_pct": 2.0}
 
 WHITE_GPS = {"white_std_m": 2.5, "bias_std_m": 0.3}
-_WITH_GPS_PARAMS = """\
-import json, sys
-import sitl.main as emulator
-from sitl.params import GpsParams, SitlParams
-gps = json.loads(sys.argv[1])
-emulator.SitlParams = lambda: SitlParams(gps=GpsParams(**gps))
-sys.exit(emulator.main(sys.argv[2:]))
-"""
 
 
 def drive(t_s: float) -> tuple[int, int]:
@@ -99,39 +87,6 @@ class RunResult:
     """(frame time, GpsVerdict) of every fix."""
 
 
-def _free_tcp_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def _start_emulator(seed: int, duration_s: float, truth_log: Path, world: Path | None, gps: dict | None):
-    port = _free_tcp_port()
-    flags = ["--lockstep", "--seed", str(seed), "--endpoint", f"tcpin:127.0.0.1:{port}", "--truth-log", str(truth_log),
-             f"--home={HOME[0]},{HOME[1]},{HOME[2]},0", "--duration-s", str(duration_s + 1.0)]
-    if world is not None:
-        flags += ["--world", str(world)]
-    if gps:
-        argv = [sys.executable, "-c", _WITH_GPS_PARAMS, json.dumps(gps), *flags]
-    else:
-        argv = [sys.executable, "-m", "sitl", *flags]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    for line in proc.stdout:  # the emulator prints "rover-sitl: ready" once its endpoints are open
-        if line.startswith("rover-sitl: ready"):
-            return proc, f"tcp:127.0.0.1:{port}"
-    raise RuntimeError(f"rover-sitl did not start: exit {proc.wait()}: {proc.stderr.read().strip()}")
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(5.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 def run_once(seed: int, duration_s: float, gps: dict | None = None, faults: bool = False) -> RunResult:
     """One lockstep run; returns the per-frame errors, the true path and the GPS error parts."""
     frame = LocalFrame(*HOME)
@@ -143,8 +98,12 @@ def run_once(seed: int, duration_s: float, gps: dict | None = None, faults: bool
         if faults:
             world = Path(tmp) / "faults.geojson"
             world.write_text(json.dumps({"type": "FeatureCollection", "features": [], "faults": FAULTS}))
-        proc, url = _start_emulator(seed, duration_s, truth_log, world, gps)
-        try:
+        flags = ["--seed", str(seed), "--truth-log", str(truth_log), f"--home={HOME[0]},{HOME[1]},{HOME[2]},0",
+                 "--duration-s", str(duration_s + 1.0)]
+        flags += [f"--set=gps.{key}={value}" for key, value in (gps or {}).items()]
+        if world is not None:
+            flags += ["--world", str(world)]
+        with sitl_process(*flags, start_timeout_s=READY_TIMEOUT_S) as url:
             client = LockstepClient(url, timeout_s=READY_TIMEOUT_S)
             client.arm()
 
@@ -173,8 +132,6 @@ def run_once(seed: int, duration_s: float, gps: dict | None = None, faults: bool
 
             client.run(duration_s, on_frame)
             client.close()
-        finally:
-            _stop(proc)
         for line in truth_log.read_text().splitlines():
             record = json.loads(line)
             if record["type"] == "gps" and not record["dropped"] and record["t_s"] >= WARMUP_S:

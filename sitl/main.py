@@ -22,7 +22,7 @@ from sitl.clock import FrameClock, LockstepMarker, Pacer
 from sitl.endpoints import Endpoint, EndpointError, PtyEndpoint, mavlink, open_endpoint
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
 from sitl.mavlink_vehicle import PARAM_NAMES, LinkParams, MavlinkVehicle
-from sitl.params import SitlParams
+from sitl.params import RANGEFINDER_SETS, SitlParams, apply_override
 from sitl.truthlog import TruthLog
 from sitl.vehicle import SimRover
 from sitl.world import Home, World, WorldError, load_world, scatter_obstacles
@@ -123,6 +123,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration-s", type=_non_negative, metavar="S", help="stop after S sim seconds")
     parser.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE",
                         help="set a parameter at start (SYSID_MYGCS, RC_OVERRIDE_TIME, ARMING_CHECK, SIM_*)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE", dest="overrides",
+                        help="override an emulator model parameter of sitl/params.py, e.g. gps.white_std_m=2.5")
+    parser.add_argument("--rangefinders", choices=sorted(RANGEFINDER_SETS), default="default",
+                        help="rangefinder layout: default (six, with front-left/right at 45 deg) or paper (the four)")
     return parser
 
 
@@ -305,7 +309,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{PROG}: error: --write-world {args.write_world}: {exc.strerror or exc}", file=sys.stderr)
             return 2
 
-    rover = SimRover(SitlParams(), world, home, args.seed)
+    params = SitlParams()
+    params.rangefinder.sensors = RANGEFINDER_SETS[args.rangefinders]()
+    for assignment in args.overrides:
+        try:
+            apply_override(params, assignment)
+        except ValueError as exc:
+            print(f"{PROG}: error: --set {exc}", file=sys.stderr)
+            return 2
+    rover = SimRover(params, world, home, args.seed)
     vehicle = MavlinkVehicle(rover, LinkParams(), fault_params=FAULT_PARAMS)
     for name, value in args.param:
         vehicle.set_param(name, value)

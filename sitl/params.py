@@ -211,3 +211,43 @@ class SitlParams:
     """Interval of footprint-versus-obstacle checks (2 cm of travel at top speed)."""
     contact_release_m: float = 0.05
     """A contact ends once the footprint is this far from the obstacle (one event per contact)."""
+
+
+RANGEFINDER_SETS = {"default": default_rangefinders, "paper": paper_rangefinders}
+"""Named rangefinder layouts: ``default`` (six: the paper's four plus front-left/right at 45 deg)
+and ``paper`` (front, back, left, right)."""
+
+
+def apply_override(params: SitlParams, assignment: str) -> None:
+    """Apply one ``section.field=value`` (e.g. ``gps.white_std_m=2.5``) to ``params`` in place.
+
+    Raises ValueError with a one-line message naming the key for an unknown section or field, a
+    value that is not a number, or a non-scalar field.
+    """
+    import dataclasses
+
+    key, sep, text = assignment.partition("=")
+    path = key.strip().split(".")
+    if not sep or len(path) not in (1, 2):
+        raise ValueError(f"expected SECTION.FIELD=VALUE (or FIELD=VALUE), got {assignment!r}")
+    target = params
+    for name in path[:-1]:
+        if not dataclasses.is_dataclass(getattr(target, name, None)):
+            sections = [f.name for f in dataclasses.fields(params) if dataclasses.is_dataclass(getattr(params, f.name))]
+            raise ValueError(f"{key}: unknown section {name!r} (known: {', '.join(sections)})")
+        target = getattr(target, name)
+    leaf = path[-1]
+    fields = {f.name: f for f in dataclasses.fields(target)}
+    current = getattr(target, leaf, None)
+    if leaf not in fields or not isinstance(current, (int, float)) or isinstance(current, bool):
+        scalars = [n for n in fields if isinstance(getattr(target, n), (int, float)) and not isinstance(getattr(target, n), bool)]
+        raise ValueError(f"{key}: unknown numeric field {leaf!r} (known: {', '.join(scalars)})")
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{key}: expected a number, got {text.strip()!r}") from None
+    if isinstance(current, int):
+        if value != int(value):
+            raise ValueError(f"{key}: expected a whole number, got {text.strip()!r}")
+        value = int(value)
+    setattr(target, leaf, value)

@@ -235,3 +235,23 @@ def test_fault_parameter_names_fit_a_mavlink_param_id():
     from sitl.faults import FAULT_PARAMS
 
     assert all(len(name) <= 16 for name in FAULT_PARAMS), "MAVLink param_id carries at most 16 characters"
+
+
+def test_model_parameters_are_overridden_by_name():
+    import pytest
+
+    from sitl.params import SitlParams, apply_override
+
+    params = SitlParams()
+    apply_override(params, "gps.white_std_m=2.5")
+    apply_override(params, "encoder.ticks_per_rev=360")
+    assert params.gps.white_std_m == 2.5 and params.encoder.ticks_per_rev == 360
+    for bad, message in [
+        ("gps.nope=1", "unknown numeric field 'nope'"),
+        ("gpz.white_std_m=1", "unknown section 'gpz'"),
+        ("gps.white_std_m=wide", "expected a number"),
+        ("encoder.ticks_per_rev=1.5", "expected a whole number"),
+        ("gps.white_std_m", "expected SECTION.FIELD=VALUE"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            apply_override(params, bad)

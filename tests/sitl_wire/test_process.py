@@ -52,6 +52,8 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--param", "SIM_WHEEL_SLIP=3"], "outside"),
     (["--scatter", "3"], "--along"),
     (["--bogus"], "--bogus"),
+    (["--set", "gps.nope=1"], "--set gps.nope: unknown numeric field"),
+    (["--rangefinders", "three"], "invalid choice"),
 ])
 def test_bad_flags_give_one_line_error(capsys, flags: list[str], needle: str) -> None:
     assert needle in main_error_line(capsys, *flags, "--duration-s", "0")
