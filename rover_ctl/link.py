@@ -189,6 +189,18 @@ class VehicleLink:
         """Why the connection is down (None while it works); reads are retried every reconnect_period_s."""
         self.reconnect_period_s = reconnect_period_s
         self._retry_wall_s = 0.0
+        # Every send goes through the connection's write: a failed one marks the link down
+        # instead of raising out of whatever was sending.
+        write = self.conn.write
+
+        def guarded_write(buf: bytes) -> Any:
+            try:
+                return write(buf)
+            except OSError as exc:
+                self._down(exc)
+                return None
+
+        self.conn.write = guarded_write
         self.url = url
         self.target_system = 1
         self.target_component = 1
@@ -235,8 +247,7 @@ class VehicleLink:
             try:
                 msg = self.conn.recv_msg()
             except OSError as exc:  # the connection itself failed (peer gone, port vanished)
-                self.link_error = str(exc) or type(exc).__name__
-                self._retry_wall_s = self._wall() + self.reconnect_period_s
+                self._down(exc)
                 break
             except Exception:  # a frame pymavlink could not unpack
                 self.garbage_frames += 1
@@ -250,6 +261,10 @@ class VehicleLink:
                 if stop_at_marker and isinstance(item, FrameMarker):
                     break
         return items
+
+    def _down(self, exc: OSError) -> None:
+        self.link_error = str(exc) or type(exc).__name__
+        self._retry_wall_s = self._wall() + self.reconnect_period_s
 
     def _decode(self, msg: Any) -> Any:
         kind = msg.get_type()
