@@ -17,6 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 JUMP = ROOT / "missions" / "cmac_jump.waypoints"
 HOME = (-35.363261, 149.165230, 584.0)
 MODE_RTL = 11
+MODE_MANUAL = 0
 
 pytestmark = pytest.mark.sitl
 
@@ -88,6 +89,9 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
         near_home_m = 4.0
         assert run.wait_for(lambda p: p.position_en is not None and math.dist(p.position_en, (0, 0)) < near_home_m, sim_timeout_s=60.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # settles at home
+        # MANUAL: the daemon hands the RC channels back to the radio and stops overriding.
+        assert run.set_mode(MODE_MANUAL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
+        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
 
     events = read_jsonl(out / "events.jsonl")
     hold_s = next(e["t_s"] for e in events if e["type"] == "mode" and e["name"] == "HOLD")
@@ -99,3 +103,7 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     last = states[-1]
     assert math.dist(home.to_enu(last["lat_deg"], last["lon_deg"]), (0.0, 0.0)) < near_home_m
     assert abs(last["speed_mps"]) < 0.05
+    log = mavutil.mavlink_connection(str(out / "vehicle.tlog"))
+    overrides = [(m.chan1_raw, m.chan3_raw) for m in iter(lambda: log.recv_match(type="RC_CHANNELS_OVERRIDE"), None)]
+    # Released once, then silent until the stop's single neutral.
+    assert overrides[-2:] == [(0, 0), (1500, 1500)] and overrides.count((0, 0)) == 1
