@@ -16,7 +16,7 @@ from rover_ctl.config import ConfigError, load_config
 
 
 def add_parser(subparsers) -> None:
-    parser = subparsers.add_parser("run", help="run the controller daemon", description=__doc__.splitlines()[0])
+    parser = subparsers.add_parser("run", help="run the controller daemon", description="The controller daemon: vehicle link, GCS link, control loop (docs/daemon.md).")
     parser.add_argument("--vehicle", metavar="URL", help="vehicle link, pymavlink connection string (default: link.vehicle_url, tcp:127.0.0.1:5760)")
     parser.add_argument("--gcs", metavar="URL", help="GCS link (default: link.gcs_url, udpout:127.0.0.1:14550)")
     parser.add_argument("--config", metavar="FILE", help="TOML config file (sections as rover_ctl.config)")

@@ -20,7 +20,7 @@ def _positive(text: str) -> float:
 
 
 def add_parser(subparsers) -> None:
-    parser = subparsers.add_parser("sim", help="run a mission against the emulator and write a report", description=__doc__.splitlines()[0])
+    parser = subparsers.add_parser("sim", help="run a mission against the emulator and write a report", description="Run a mission against the emulator end to end and write a report (docs/daemon.md).")
     parser.add_argument("mission", type=Path, metavar="MISSION", help="mission file (.waypoints, .txt or .plan)")
     world = parser.add_mutually_exclusive_group()
     world.add_argument("--world", type=Path, metavar="GEOJSON", help="emulator world (obstacles, faults)")
