@@ -260,3 +260,20 @@ def test_long_statustext_is_chunked(url, udp_port):
     finally:
         link.close()
 
+
+
+def test_sys_status_health_follows_ardupilot(url, udp_port):
+    """Healthy unless failed, and the GEOFENCE bit healthy while not breached (MAVProxy says
+    "fence breach" when it is clear)."""
+    link, conn = connected(url, udp_port)
+    try:
+        gps, fence = mav.MAV_SYS_STATUS_SENSOR_GPS, mav.MAV_SYS_STATUS_GEOFENCE
+        assert link.send_sys_status(0.0, 12.1, 80, present=gps)
+        status = expect(conn, "SYS_STATUS")
+        assert status.onboard_control_sensors_health & (gps | fence) == gps | fence
+        assert status.voltage_battery == 12100 and status.battery_remaining == 80
+        assert link.send_sys_status(10.0, 12.0, 79, present=gps | fence, failed=gps | fence)
+        status = expect(conn, "SYS_STATUS")
+        assert status.onboard_control_sensors_present & fence and not status.onboard_control_sensors_health & (gps | fence)
+    finally:
+        link.close()
