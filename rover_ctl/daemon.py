@@ -137,8 +137,9 @@ class Daemon:
     def stop(self) -> None:
         self._stop = True
 
-    def open(self) -> None:
-        """Connect both links and open the logs (raises LinkError when the vehicle is absent)."""
+    def open(self) -> bool:
+        """Connect both links and open the logs. False if stopped while waiting for the vehicle;
+        raises LinkError when the vehicle is absent."""
         cfg = self.config
         if self.log_dir:
             self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -154,7 +155,9 @@ class Daemon:
             self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog"))
             self.tlogs[-1].attach(self.link.conn)
         log.info("vehicle link %s: waiting for a heartbeat", cfg.link.vehicle_url)
-        self.vehicle = self.link.wait_vehicle(self.params.vehicle_wait_s)
+        self.vehicle = self.link.wait_vehicle(self.params.vehicle_wait_s, cancelled=lambda: self._stop)
+        if self.vehicle is None:
+            return False
         log.info("vehicle sysid %d found (mode %d, armed %s)", self.link.target_system, self.vehicle.custom_mode, self.vehicle.armed)
         self._request_streams()
         result = self.link.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MODE_MANUAL)
@@ -167,6 +170,7 @@ class Daemon:
             self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog"))
             self.tlogs[-1].attach(self.gcs.conn)
         log.info("GCS link %s ready", cfg.link.gcs_url)
+        return True
 
     def _request_streams(self) -> None:
         p = self.params
@@ -180,7 +184,9 @@ class Daemon:
     def run(self) -> int:
         """Open, loop until stopped, close. Returns a process exit code."""
         try:
-            self.open()
+            if not self.open():
+                self.close()
+                return EXIT_OK
         except LinkError as exc:
             log.error("%s", exc)
             self.close()
@@ -198,12 +204,9 @@ class Daemon:
     def shutdown(self) -> None:
         """Motors neutral first, then disarm, then close links and logs."""
         if self.link:
-            try:
-                self.link.send_override(self.config.wheel_control.rc_trim_us, self.config.wheel_control.rc_trim_us)
-                self.link.arm_async(False)
-                log.info("stopped: motors neutral, disarm sent")
-            except OSError as exc:
-                log.warning("could not send neutral on stop: %s", exc)
+            self.link.send_override(self.config.wheel_control.rc_trim_us, self.config.wheel_control.rc_trim_us)
+            self.link.arm_async(False)
+            log.info("stopped: motors neutral, disarm sent")
         self.close()
 
     def close(self) -> None:

@@ -422,11 +422,14 @@ class VehicleLink:
 
     # ---- blocking helpers for start-up ---------------------------------------------------------
 
-    def wait_vehicle(self, timeout_s: float) -> VehicleStatus:
-        """Heartbeat until the vehicle's heartbeat arrives; lockstep markers are answered meanwhile
-        (nothing is being commanded yet). Decoded items are kept for the next ``poll``."""
+    def wait_vehicle(self, timeout_s: float, cancelled: Callable[[], bool] = lambda: False) -> VehicleStatus | None:
+        """Heartbeat until the vehicle's heartbeat arrives (None if ``cancelled()`` first); lockstep
+        markers are answered meanwhile (nothing is being commanded yet). Decoded items are kept
+        for the next ``poll``."""
         deadline = self._wall() + timeout_s
         while self.vehicle is None:
+            if cancelled():
+                return None
             if self._wall() > deadline:
                 raise LinkError(f"vehicle link {self.url}: no vehicle heartbeat within {timeout_s:g} s")
             self._pump(0.05)

@@ -142,3 +142,21 @@ def test_report_of_an_unfinished_run_and_of_an_empty_folder(tmp_path):
     assert not metrics["success"] and metrics["timed_out"] and metrics["waypoints_reached"] == 0
     with pytest.raises(ReportError, match="control.csv: no control log"):
         write_report(tmp_path / "nothing")
+
+
+def test_sigterm_while_waiting_for_the_vehicle_exits_0(tmp_path):
+    with socket.socket() as server:  # accepts, never speaks MAVLink
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        proc = subprocess.Popen([*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{port}", "--gcs", f"udpout:127.0.0.1:{free_port()}",
+                                 "--mission-store", ""], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        try:
+            server.settimeout(30)
+            conn, _ = server.accept()  # connected: the signal handlers are installed by now
+            proc.send_signal(signal.SIGTERM)
+            assert proc.wait(10) == 0
+            conn.close()
+        finally:
+            if proc.poll() is None:
+                proc.kill()
