@@ -64,6 +64,12 @@ CSV_COLUMNS = (
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "latency_ms",
 )  # fmt: skip
+SENSORS_PRESENT = (mav.MAV_SYS_STATUS_SENSOR_GPS | mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
+                   | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)  # fmt: skip
+"""SYS_STATUS sensors the daemon reports on the GCS link (through the vehicle)."""
+SENSOR_FAILSAFES = {"GPS lost": mav.MAV_SYS_STATUS_SENSOR_GPS, "fence breach": mav.MAV_SYS_STATUS_GEOFENCE,
+                    "vehicle link": mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS}  # fmt: skip
+"""Active failsafe -> the SYS_STATUS health bit it clears."""
 RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
                  6: "range_left_m", 7: "range_front_left_m"}  # fmt: skip
 
@@ -574,7 +580,10 @@ class Daemon:
         if self.link.last_gps_msg is not None:
             self.gcs.send_gps_raw_int(now, self.link.last_gps_msg)
         if self.battery is not None:
-            self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct)
+            present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.mission.fence else 0)
+            reasons = self.decision.reasons if self.decision else ()
+            failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)
+            self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed)
         if self.estimator is None or not self.estimator.initialised:
             return
         pose = self.estimator.pose()
