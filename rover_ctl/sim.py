@@ -51,8 +51,8 @@ GCS_CONNECT_TIMEOUT_S = 30.0
 """Wall seconds for the daemon's first heartbeat on the GCS link."""
 STALL_TIMEOUT_S = 20.0
 """Wall seconds without any message from the daemon before the run is declared stuck."""
-ARM_RETRY_S = 1.0
-"""Wall seconds between arming attempts while the daemon waits for its first GPS fix."""
+ARM_RETRY_S = 0.2
+"""Wall seconds between arming attempts the daemon refused."""
 STOP_TIMEOUT_S = 10.0
 """Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
 GCS_HEARTBEAT_PERIOD_S = 1.0
@@ -295,12 +295,16 @@ class SimRun:
         return -1
 
     def arm(self, timeout_s: float = 30.0) -> None:
-        """Arm once the daemon has a home (it refuses before its first fix), wait for the flag."""
+        """Arm as soon as the daemon reports a position (it refuses to arm before its first fix).
+        Its ACK means the request went on to the vehicle; the daemon drives once the vehicle's
+        heartbeat says armed, so nothing waits here for the GCS heartbeat's flag (1 Hz of wall
+        time is many seconds of lockstep sim time)."""
+        if not self.wait_for(lambda p: p.position_en is not None, wall_timeout_s=timeout_s):
+            raise SimError(f"no position from the daemon within {timeout_s:g} s: {self.progress.last_text}")
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED:
-                if self.wait_for(lambda p: p.armed, wall_timeout_s=ARM_RETRY_S * 3):
-                    return
+                return
             self.wait_for(lambda p: False, wall_timeout_s=ARM_RETRY_S)
         raise SimError(f"the rover did not arm within {timeout_s:g} s: {self.progress.last_text}")
 
