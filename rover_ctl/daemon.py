@@ -97,9 +97,9 @@ class Daemon:
         self.config = config
         self.rulebase = load_rulebase(rulebase)
         self.log_dir = Path(log_dir) if log_dir else (Path(config.daemon.log_dir) if config.daemon.log_dir else None)
-        self.params = config.daemon
+        self.settings = config.daemon
         self._stop = False
-        self.period_s = 1.0 / self.params.control_rate_hz
+        self.period_s = 1.0 / self.settings.control_rate_hz
         # Vehicle-side state.
         self.link: VehicleLink | None = None
         self.gcs: GcsLink | None = None
@@ -154,14 +154,14 @@ class Daemon:
         self.link = VehicleLink(
             cfg.link.vehicle_url,
             cfg.link,
-            command_timeout_s=self.params.command_timeout_s,
-            command_retries=self.params.command_retries,
+            command_timeout_s=self.settings.command_timeout_s,
+            command_retries=self.settings.command_retries,
         )
         if self.log_dir:
             self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog"))
             self.tlogs[-1].attach(self.link.conn)
         log.info("vehicle link %s: waiting for a heartbeat", cfg.link.vehicle_url)
-        self.vehicle = self.link.wait_vehicle(self.params.vehicle_wait_s, cancelled=lambda: self._stop)
+        self.vehicle = self.link.wait_vehicle(self.settings.vehicle_wait_s, cancelled=lambda: self._stop)
         if self.vehicle is None:
             return False
         log.info("vehicle sysid %d found (mode %d, armed %s)", self.link.target_system, self.vehicle.custom_mode, self.vehicle.armed)
@@ -179,7 +179,7 @@ class Daemon:
         return True
 
     def _request_streams(self) -> None:
-        p = self.params
+        p = self.settings
         self.link.request_streams(
             {"ATTITUDE": p.sensor_rate_hz, "GPS_RAW_INT": p.gps_rate_hz, "DISTANCE_SENSOR": p.rangefinder_rate_hz,
              "SIMSTATE": p.truth_rate_hz},
@@ -244,7 +244,7 @@ class Daemon:
         self._send_telemetry()
         if not items:
             fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
-            select.select(fds, [], [], self.params.idle_wait_s)
+            select.select(fds, [], [], self.settings.idle_wait_s)
 
     def _on_item(self, item: Any) -> None:
         if isinstance(item, WheelDistance):
@@ -514,7 +514,7 @@ class Daemon:
             self._silent_neutral_wall_s = time.monotonic() + self.period_s
             neutral = self.wheels.neutral()
             link.send_override(neutral.steering_us, neutral.throttle_us)
-        if age_s > self.params.stream_rerequest_s and time.monotonic() - self._streams_requested_wall_s > self.params.stream_rerequest_s:
+        if age_s > self.settings.stream_rerequest_s and time.monotonic() - self._streams_requested_wall_s > self.settings.stream_rerequest_s:
             self._request_streams()  # the vehicle may have rebooted and forgotten our rates
 
     def _decide(self, t_s: float, dt_s: float, pose, decision: FailsafeDecision, row: dict[str, Any]) -> WheelCommand | None:
@@ -561,7 +561,7 @@ class Daemon:
 
     def _hold(self, t_s: float, dt_s: float, pose) -> WheelCommand:
         """Stop: brake actively (zero wheel-speed setpoints) while moving, then neutral."""
-        if pose is not None and abs(pose.speed_mps) > self.params.hold_speed_mps:
+        if pose is not None and abs(pose.speed_mps) > self.settings.hold_speed_mps:
             return self.wheels.step(t_s, dt_s, 0.0, 0.0)
         return self.wheels.neutral()
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -72,9 +73,25 @@ def test_jump_mission_completes_around_an_obstacle(tmp_path):
     assert metrics["loop_latency_p99_ms"] is not None and metrics["path_length_m"] > 50
 
 
+def download_params(run: SimRun, wall_timeout_s: float = 5.0) -> dict[str, float]:
+    """What a ground station's parameter download (MAVProxy and QGC ask on connect) gets back."""
+    run.gcs.conn.mav.param_request_list_send(*run.gcs.target)
+    values: dict[str, float] = {}
+    deadline = time.monotonic() + wall_timeout_s
+    while time.monotonic() < deadline:
+        msg = run.gcs.conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.2)
+        if msg is not None:
+            values[msg.param_id] = msg.param_value
+            if len(values) == msg.param_count:
+                break
+    return values
+
+
 def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     out = tmp_path / "run"
     with SimRun(SimOptions(mission=JUMP, out=out, timeout_s=120.0)) as run:
+        params = download_params(run)
+        assert {"SYSID_THISMAV", "WP_RADIUS"} <= params.keys() and params["SYSID_THISMAV"] == 1
         run.arm()
         run.start_mission()
         assert run.wait_for(lambda p: 1 in p.reached, sim_timeout_s=60.0)
