@@ -1,8 +1,9 @@
 """``rover-ctl``: the command line. Each subcommand lives in ``rover_ctl/commands/<name>.py`` and
 exposes ``add_parser(subparsers)``, which registers its parser and sets ``func(args) -> int``.
 
-Errors meant for the user are raised as ``UserError`` (or ``ConfigError``/``ValueError`` subclasses
-that carry a one-line message) and printed as ``rover-ctl: error: ...`` with exit status 2.
+Errors meant for the user are raised as ``UserError`` or ``ConfigError`` (one-line messages) and
+printed as ``rover-ctl: error: ...`` with exit status 2. Run it as ``rover-ctl`` or
+``python -m rover_ctl``.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import importlib
 import sys
 
 from rover_ctl import __version__
+from rover_ctl.config import ConfigError
 
 # Subcommand modules, in the order shown by --help.
 COMMANDS = ("run", "sim", "mission", "fuzzy")
@@ -49,10 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
-    except UserError as exc:
+    except (UserError, ConfigError) as exc:
         print(f"rover-ctl: error: {exc}", file=sys.stderr)
         return 2
 
-
-if __name__ == "__main__":
-    sys.exit(main())

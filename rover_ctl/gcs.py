@@ -300,6 +300,10 @@ class GcsLink:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
             if msg.type == mav.MAV_TYPE_GCS:
+                if self.last_gcs_heartbeat_s is None:
+                    # A first ground station: answer now rather than at the next period, so it
+                    # finds its autopilot at once (on udpin nothing reached it before it spoke).
+                    self._next_heartbeat_s = None
                 self.last_gcs_heartbeat_s = now_s
             return
         if kind in MissionService.HANDLED:

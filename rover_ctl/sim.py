@@ -40,9 +40,8 @@ from rover_ctl.mission.client import MissionClient  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
 
-ROVER_CTL = [sys.executable, "-c", "import sys; from rover_ctl.cli import main; sys.exit(main())"]
-"""The ``rover-ctl`` command of this interpreter (``-m rover_ctl.cli`` would load the CLI twice,
-as ``__main__`` and as ``rover_ctl.cli``, and its UserError would not be caught)."""
+ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
+"""The ``rover-ctl`` command of this interpreter."""
 WATCHER_SYSID = 254
 """Our id on the emulator's second endpoint: not SYSID_MYGCS, so it can never drive the rover."""
 SITL_READY_TIMEOUT_S = 30.0

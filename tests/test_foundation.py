@@ -53,7 +53,7 @@ def test_missing_config_file(tmp_path):
 
 
 def test_cli_help_and_bad_flag():
-    ok = subprocess.run([sys.executable, "-m", "rover_ctl.cli", "--help"], capture_output=True, text=True)
+    ok = subprocess.run([sys.executable, "-m", "rover_ctl", "--help"], capture_output=True, text=True)
     assert ok.returncode == 0 and "rover-ctl" in ok.stdout
-    bad = subprocess.run([sys.executable, "-m", "rover_ctl.cli", "--no-such-flag"], capture_output=True, text=True)
+    bad = subprocess.run([sys.executable, "-m", "rover_ctl", "--no-such-flag"], capture_output=True, text=True)
     assert bad.returncode == 2 and "unrecognized arguments: --no-such-flag" in bad.stderr
