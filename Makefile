@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-# The main job. Until the daemon lands this is the emulator under a scripted drive.
+# The main job: the emulator and the daemon drive a bundled mission among obstacles, with a report.
 DEMO_CMD ?= $(BIN)/rover-ctl sim missions/cmac_loop.waypoints --world missions/worlds/cmac_loop.geojson --lockstep --out runs/demo
 
 demo: $(STAMP)
