@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.integrate import trapezoid
 
 from rover_ctl.fuzzy.membership import Variable
 
@@ -51,8 +52,8 @@ def _sampled(mu: np.ndarray, output: Variable, resolution: int, reduce: Callable
 
 
 def _centre_of_gravity(aggregate: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    area = np.trapezoid(aggregate, xs, axis=1)
-    moment = np.trapezoid(aggregate * xs, xs, axis=1)
+    area = trapezoid(aggregate, xs, axis=1)
+    moment = trapezoid(aggregate * xs, xs, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(area > 0.0, moment / area, np.nan)
 
