@@ -491,10 +491,12 @@ class Daemon:
         if decision.action == Action.RTL and self.mode == RoverMode.AUTO and self.executor is not None:
             self._enter_mode(int(RoverMode.RTL))
         if decision.replan and self.follower is not None and pose is not None:
-            # Backed off after being stuck: mark the spot ahead as blocked and plan around it.
-            ahead_m = self.config.planner.blocked_radius_m + self.config.robot.footprint_length_m
+            # Backed off after being stuck: mark the spot ahead as blocked and plan around it; each
+            # further try in the same episode blocks a wider circle (the first detour was too tight).
+            radius_m = self.config.planner.blocked_radius_m * max(1, decision.stuck_tries)
+            ahead_m = radius_m + self.config.robot.footprint_length_m
             self.follower.block(t_s, (pose.east_m + ahead_m * math.cos(pose.heading_rad),
-                                      pose.north_m + ahead_m * math.sin(pose.heading_rad)))  # fmt: skip
+                                      pose.north_m + ahead_m * math.sin(pose.heading_rad)), radius_m)  # fmt: skip
         return decision
 
     def _check_silence(self) -> None:

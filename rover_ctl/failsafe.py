@@ -97,6 +97,8 @@ class FailsafeDecision:
     blocked_orientations: frozenset[int]
     dead_reckoning: bool
     replan: bool
+    stuck_tries: int = 0
+    """Back-offs so far in the current stuck episode (the daemon widens each re-plan's detour)."""
 
 
 class _Latch:
@@ -185,7 +187,7 @@ class Failsafes:
 
         action = max(actions.values(), default=Action.NONE)
         reasons = tuple(actions)
-        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan)
+        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan, self._tries)
 
     def _stuck_step(self, now_s: float, inputs: FailsafeInputs, events: list[FailsafeEvent], actions: dict[str, Action]) -> bool:
         """Commanded motion without progress: back off, re-plan; after ``stuck_max_tries``, hold."""

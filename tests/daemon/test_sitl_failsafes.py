@@ -3,10 +3,12 @@ PARAM_SET on the emulator's second endpoint) or by the GCS going quiet, and each
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
+from rover_ctl.geo import LocalFrame
 from rover_ctl.report import read_jsonl
 from rover_ctl.sim import SimOptions, SimRun
 
@@ -136,3 +138,33 @@ def test_vehicle_gone_is_detected_on_the_wall_clock(tmp_path):
         assert run.wait_for(lambda p: p.system_status == MAV_STATE_CRITICAL, wall_timeout_s=3.0)
         assert run.daemon.poll() is None
     assert not any(t.startswith("FS stuck") for t in run.progress.texts)
+
+
+JUMP = ROOT / "missions" / "cmac_jump.waypoints"
+FRONT_SENSORS_MASK = 1 | 16 | 32
+"""Emulator rangefinder ids 0 (front), 4 (front-left) and 5 (front-right) as a SIM_RF_STUCK mask."""
+
+
+def test_stuck_on_an_unseen_obstacle_backs_off_and_replans(tmp_path):
+    """The front rangefinders stick at "nothing in range" (a failure they cannot report), so the
+    rover drives into a drum on its first leg and stalls against it: the stuck failsafe backs off,
+    the spot ahead is blocked, and the re-planned path goes around to finish the mission."""
+    home = (-35.363261, 149.165230, 584.0)
+    lat, lon = LocalFrame(*home).to_geodetic(0.5, 8.0)
+    drum = {"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon, lat]}, "properties": {"id": "drum", "radius_m": 0.5}}
+    world = tmp_path / "drum.geojson"
+    world.write_text(json.dumps({"type": "FeatureCollection", "home": [home[1], home[0], home[2], 0.0], "features": [drum]}))
+    out = tmp_path / "run"
+    options = SimOptions(mission=JUMP, out=out, world=world, timeout_s=240.0,
+                         sitl_params=[f"SIM_RF_STUCK={FRONT_SENSORS_MASK}"])  # fmt: skip
+    with SimRun(options) as run:
+        run.arm()
+        run.start_mission()
+        assert run.wait_for(lambda p: p.complete, sim_timeout_s=200.0), run.progress.texts
+        texts = run.progress.texts
+    assert any(t.startswith("FS stuck: backing off") for t in texts), texts
+    assert not any(t.startswith("FS stuck: gave up") for t in texts), texts
+    events = read_jsonl(out / "events.jsonl")
+    stuck_s = next(e["t_s"] for e in events if e["type"] == "failsafe" and "stuck" in e["reasons"])
+    detours = [e for e in events if e["type"] == "plan" and e["t_s"] > stuck_s and e["goal_seq"] == 1]
+    assert detours and len(detours[0]["path_en"]) > 2  # the re-plan goes around the blocked spot

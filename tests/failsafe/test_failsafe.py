@@ -149,6 +149,7 @@ def test_stuck_backs_off_then_replans_then_holds_after_max_tries():
     assert all(d.action is Action.BACK_OFF and not d.replan for _, d in backing)
     _, d = run_stuck(fs, 6.0, 6.1, (-0.5, 0.0))[0]
     assert d.replan and d.action is Action.NONE  # back-off over: re-plan once
+    assert d.stuck_tries == 1
     trace = run_stuck(fs, 6.1, 10.2, (-0.5, 0.0))
     assert [d.action for _, d in trace].count(Action.BACK_OFF) == 1  # second try
     run_stuck(fs, 10.2, 12.2, (-0.7, 0.0), speed=-0.3)
