@@ -555,7 +555,7 @@ class Daemon:
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
-                                  ranges, out.speed_limit_mps)  # fmt: skip
+                                  ranges, out.speed_limit_mps, guidance.remaining_m)  # fmt: skip
         self.commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
         row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip

@@ -90,10 +90,17 @@ class Navigator:
         target_north_m: float,
         ranges_m: dict[int, float],
         speed_limit_mps: float | None = None,
+        target_distance_m: float | None = None,
     ) -> NavOutput:
+        """``target_*`` is the point to steer to (the planner's carrot); ``target_distance_m``, when
+        given, is how far the target really is (the path length left to the waypoint), which the
+        rule base's distance input should see: the paper's controller slows down within 7.5 m of
+        its target and would crawl if it saw only the carrot 3 m ahead. Default: the straight-line
+        distance to the steering point."""
         d_east, d_north = target_east_m - pose_east_m, target_north_m - pose_north_m
-        distance_m = math.hypot(d_east, d_north)
-        relative_rad = math.remainder(math.atan2(d_north, d_east) - heading_rad, math.tau) if distance_m > 0.0 else 0.0
+        steer_m = math.hypot(d_east, d_north)
+        relative_rad = math.remainder(math.atan2(d_north, d_east) - heading_rad, math.tau) if steer_m > 0.0 else 0.0
+        distance_m = steer_m if target_distance_m is None else max(target_distance_m, 0.0)
         inputs = {"target_distance": distance_m, "target_direction": math.degrees(relative_rad) % 360.0}
         for name, orientation, scale in self._obstacles:
             range_m = ranges_m.get(orientation, math.nan)

@@ -152,3 +152,17 @@ def test_paper_turns_away_from_an_obstacle_in_front(paper_nav):
     assert ahead.left_rpm > ahead.right_rpm  # veers right, away
     walled_right = paper_nav.step(0.0, 0.0, 0.0, 10.0, 0.0, {**CLEAR4, 0: 0.5, 2: 0.3})
     assert walled_right.right_rpm > walled_right.left_rpm  # then left, away from the right wall
+
+
+def test_distance_input_is_the_real_target_distance_not_the_steering_point(paper_nav, default_nav):
+    """Steering at a carrot 3 m ahead while the waypoint is 20 m away: the paper's controller sees
+    20 m (far: full speed), not 3 m (near: its stop rules), and the default is unchanged."""
+    clear = {o: math.inf for o in (0, 1, 2, 4, 6, 7)}
+    paper_carrot = paper_nav.step(0.0, 0.0, 0.0, 3.0, 0.0, clear)
+    paper_far = paper_nav.step(0.0, 0.0, 0.0, 3.0, 0.0, clear, target_distance_m=20.0)
+    assert paper_far.inputs["target_distance"] == 20.0
+    assert paper_far.left_rpm > 1.5 * paper_carrot.left_rpm > 0.0
+    assert paper_far.inputs["target_direction"] == paper_carrot.inputs["target_direction"]  # still steers to the carrot
+    default_carrot = default_nav.step(0.0, 0.0, 0.0, 3.0, 0.0, clear)
+    default_far = default_nav.step(0.0, 0.0, 0.0, 3.0, 0.0, clear, target_distance_m=20.0)
+    assert (default_far.left_rpm, default_far.right_rpm) == pytest.approx((default_carrot.left_rpm, default_carrot.right_rpm))
