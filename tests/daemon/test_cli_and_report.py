@@ -62,8 +62,7 @@ def test_sigterm_stops_cleanly_with_neutral_first(tmp_path):
         mode = vehicle.recv_match(type="COMMAND_LONG", condition="COMMAND_LONG.command==176", blocking=True, timeout=10)
         assert mode is not None and mode.param2 == 0  # MANUAL
         vehicle.mav.command_ack_send(mode.command, mavutil.mavlink.MAV_RESULT_ACCEPTED)
-        # Nothing drives before the first GPS fix, so the first override is the stop's neutral,
-        # and it comes before the disarm.
+        # Nothing drives before the first GPS fix, so every override is neutral.
         proc.send_signal(signal.SIGTERM)
         seen = []
         while True:
@@ -74,7 +73,9 @@ def test_sigterm_stops_cleanly_with_neutral_first(tmp_path):
             elif msg.command == mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
                 seen.append(("arm", msg.param1))
                 break
-        assert seen == [("override", 1500, 1500), ("arm", 0.0)]
+        # Neutral before the disarm, and nothing but neutral (under load the vehicle-silence
+        # failsafe may already have sent neutral of its own before the SIGTERM).
+        assert seen[-1] == ("arm", 0.0) and seen[:-1] and set(seen[:-1]) == {("override", 1500, 1500)}, seen
         assert proc.wait(10) == 0
     finally:
         if proc.poll() is None:
