@@ -304,6 +304,18 @@ class NavigatorParams:
 
 
 @dataclass
+class ProximityParams:
+    """The short-term obstacle memory (``rover_ctl.proximity``) between rangefinders and navigator."""
+
+    memory_s: float = 1.5
+    """How long an echo is remembered: long enough to cover the turn that takes an obstacle out of
+    a narrow beam, short enough that a moving obstacle leaves little trail."""
+    sector_half_deg: float = 22.5
+    """Each sensor answers for this much either side of its axis: with eight 45 degree directions
+    the sectors tile the circle, as AP_Proximity's do."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here."""
 
@@ -317,6 +329,7 @@ class Config:
     daemon: DaemonParams = field(default_factory=DaemonParams)
     gcs: GcsParams = field(default_factory=GcsParams)
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
+    proximity: ProximityParams = field(default_factory=ProximityParams)
 
 
 def _coerce(value: Any, current: Any, where: str) -> Any:

@@ -44,6 +44,7 @@ from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
 from rover_ctl.navigator import Navigator
 from rover_ctl.planner import Fence, PathFollower, Planner
+from rover_ctl.proximity import ObstacleMemory
 from rover_ctl.readings import Attitude, GpsFix, RangeReading, WheelDistance
 from rover_ctl.telemetry_log import CsvLog, TlogWriter
 from rover_ctl.wheel_control import WheelCommand, WheelController
@@ -118,6 +119,8 @@ class Daemon:
         self._silent_neutral_wall_s = 0.0
         self._marker_wall_s = 0.0
         self.ranges: dict[int, RangeReading] = {}
+        self.proximity = ObstacleMemory(config.proximity, config.robot.footprint_length_m, config.robot.footprint_width_m)
+        self._remembered_s: dict[int, float] = {}  # time of the last reading put into the memory, per orientation
         self._last_said: str | None = None
         self.battery: Battery | None = None
         # Autopilot state the GCS sees.
@@ -551,7 +554,11 @@ class Daemon:
             self._say_once(f"No path: {guidance.error}")
             return self._hold(t_s, dt_s, pose)
         row.update(target_east_m=guidance.target_en[0], target_north_m=guidance.target_en[1], cross_track_m=guidance.cross_track_m)
-        ranges = {o: r.range_m for o, r in self.ranges.items()}
+        for orientation, reading in self.ranges.items():
+            if reading.time_s > self._remembered_s.get(orientation, -math.inf):
+                self._remembered_s[orientation] = reading.time_s
+                self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
+        ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self.ranges.items()})
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],

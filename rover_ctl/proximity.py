@@ -1,0 +1,67 @@
+"""Short-term obstacle memory from the rangefinders, after ArduPilot's AP_OADatabase and the
+sectors of AP_Proximity.
+
+A rangefinder is a narrow beam. As the rover turns, an obstacle it saw a moment ago falls into the
+gap between beams (a 15 degree front beam covers +-7.5 deg; the 45 degree beams start at 37.5) and
+a memoryless navigator, seeing "nothing in range", drives on into it. So every echo is kept as a
+point in the local ENU frame for ``memory_s``, and the range handed to the navigator for each
+sensor is the nearer of its latest reading and the nearest remembered point inside that sensor's
+sector (``sector_half_deg`` either side of its axis), measured from the sensor.
+
+Sensor positions are taken on the footprint's edge (front/back at half the length, sides at half
+the width, diagonals at the corners), which is where small rovers mount them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rover_ctl.config import ProximityParams
+
+ORIENTATION_RAD = {o: -math.radians(45.0 * o) for o in range(8)}
+"""MAV_SENSOR_ORIENTATION yaw steps (45 deg clockwise each) as body angles (counter-clockwise positive)."""
+
+
+class ObstacleMemory:
+    """Echoes remembered in ENU; ``ranges`` folds them into per-sensor ranges."""
+
+    def __init__(self, params: ProximityParams, footprint_length_m: float, footprint_width_m: float) -> None:
+        self.params = params
+        self._half_length_m = footprint_length_m / 2.0
+        self._half_width_m = footprint_width_m / 2.0
+        self._points = np.empty((0, 3))  # rows: time_s, east_m, north_m
+        self._sector_cos = math.cos(math.radians(params.sector_half_deg))
+
+    def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
+        """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
+        body = ORIENTATION_RAD[orientation % 8]
+        forward = self._half_length_m * np.sign(round(math.cos(body), 6))
+        left = self._half_width_m * np.sign(round(math.sin(body), 6))
+        c, s = math.cos(heading_rad), math.sin(heading_rad)
+        return east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + body
+
+    def add(self, time_s: float, east_m: float, north_m: float, heading_rad: float, orientation: int, range_m: float) -> None:
+        """Remember the echo of one reading taken with the rover at this pose (inf: no echo)."""
+        if not math.isfinite(range_m) or range_m < 0.0:
+            return
+        e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
+        point = (time_s, e + range_m * math.cos(axis), n + range_m * math.sin(axis))
+        self._points = np.vstack((self._points, point))
+
+    def ranges(self, time_s: float, east_m: float, north_m: float, heading_rad: float, latest_m: dict[int, float]) -> dict[int, float]:
+        """``latest_m`` with each sensor's range shortened to the nearest remembered echo in its sector."""
+        self._points = self._points[self._points[:, 0] > time_s - self.params.memory_s]
+        if not len(self._points):
+            return dict(latest_m)
+        out = {}
+        for orientation, range_m in latest_m.items():
+            e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
+            d_east, d_north = self._points[:, 1] - e, self._points[:, 2] - n
+            distance = np.hypot(d_east, d_north)
+            along = d_east * math.cos(axis) + d_north * math.sin(axis)
+            inside = along >= self._sector_cos * distance  # within sector_half_deg of the axis
+            nearest = float(distance[inside].min()) if inside.any() else math.inf
+            out[orientation] = min(range_m, nearest) if range_m is not None and not math.isnan(range_m) else range_m
+        return out
