@@ -22,8 +22,10 @@ venv: $(STAMP)
 # The main job: the emulator and the daemon drive a bundled mission among obstacles, with a report.
 DEMO_CMD ?= $(BIN)/rover-ctl sim missions/cmac_loop.waypoints --world missions/worlds/cmac_loop.geojson --lockstep --out runs/demo
 
+# `rover-ctl sim` exits 1 when the mission ran but did not succeed (e.g. a collision): the run and
+# its report are the demo, so that counts as done; any other failure (2 bad input, crash) fails.
 demo: $(STAMP)
-	$(DEMO_CMD)
+	@echo "$(DEMO_CMD)"; $(DEMO_CMD); status=$$?; [ $$status -le 1 ] || exit $$status
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) $(PYTEST_ARGS)

@@ -593,7 +593,7 @@ class Daemon:
             reasons = self.decision.reasons if self.decision else ()
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)
             self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed)
-        if self.estimator is None or not self.estimator.initialised:
+        if self.estimator is None or not self.estimator.initialised or not self.gcs.pose_due(now):
             return
         pose = self.estimator.pose()
         lat, lon = self.frame.to_geodetic(pose.east_m, pose.north_m)

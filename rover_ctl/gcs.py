@@ -232,12 +232,17 @@ class _Rates:
     interval_s: dict[int, float | None] = field(default_factory=dict)
     last_s: dict[int, float] = field(default_factory=dict)
 
-    def due(self, msg_id: int, now_s: float) -> bool:
+    def pending(self, msg_id: int, now_s: float) -> bool:
+        """Whether the message is due now (without taking its slot)."""
         interval = self.interval_s.get(msg_id)
         if interval is None:
             return False
         last = self.last_s.get(msg_id)
-        if last is not None and now_s - last < interval:
+        return last is None or now_s - last >= interval
+
+    def due(self, msg_id: int, now_s: float) -> bool:
+        """Whether the message is due now; if so, its slot is taken."""
+        if not self.pending(msg_id, now_s):
             return False
         self.last_s[msg_id] = now_s
         return True
@@ -475,6 +480,11 @@ class GcsLink:
             return False
         self.conn.mav.send(msg)
         return True
+
+    def pose_due(self, now_s: float) -> bool:
+        """Whether GLOBAL_POSITION_INT or ATTITUDE would go out now, so that a caller polling every
+        loop turn computes the pose for them only a few times a second."""
+        return any(self.rates.pending(m, now_s) for m in (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mav.MAVLINK_MSG_ID_ATTITUDE))
 
     def send_attitude(self, now_s: float, yaw_rad_ned: float, yawspeed_radps: float, time_boot_ms: int) -> bool:
         """ATTITUDE with the estimate's heading (NED: 0 north, clockwise positive)."""

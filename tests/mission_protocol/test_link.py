@@ -277,3 +277,15 @@ def test_sys_status_health_follows_ardupilot(url, udp_port):
         assert status.onboard_control_sensors_present & fence and not status.onboard_control_sensors_health & (gps | fence)
     finally:
         link.close()
+
+
+def test_pose_due_tells_without_taking_the_slot(url):
+    link = GcsLink(url, FAST)
+    try:
+        assert link.pose_due(0.0) and link.pose_due(0.0)  # asking twice takes nothing
+        assert link.send_global_position_int(0.0, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 0)
+        assert link.send_attitude(0.0, 0.0, 0.0, 0)
+        assert not link.pose_due(0.01)  # both just went out
+        assert link.pose_due(10.0)
+    finally:
+        link.close()
