@@ -1,6 +1,6 @@
 """Pose estimator accuracy over the wire: the real emulator (``rover-sitl --lockstep``, a separate
 process) drives a scripted loop; every GPS_RAW_INT, ATTITUDE and WHEEL_DISTANCE goes through
-the daemon's decoders into ``rover_ctl.estimator.PoseEstimator``, and each frame's pose is
+the daemon's decoders into ``rover_ctl.estimation.estimator.PoseEstimator``, and each frame's pose is
 compared with that frame's SIMSTATE (ground truth).
 
 Per scenario, over seeded runs (after ``WARMUP_S``):
@@ -32,10 +32,10 @@ import numpy as np
 
 from bench.lockstep_client import LockstepClient, sitl_process
 from rover_ctl.config import EstimatorParams, RobotParams
-from rover_ctl.estimator import GpsVerdict, PoseEstimator
-from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
-from rover_ctl.link import decode_gps
-from rover_ctl.readings import Attitude, WheelDistance
+from rover_ctl.estimation.estimator import GpsVerdict, PoseEstimator
+from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
+from rover_ctl.mavlink.vehicle import decode_gps
+from rover_ctl.estimation.readings import Attitude, WheelDistance
 
 HOME = (-35.363261, 149.165230, 584.0)
 WARMUP_S = 10.0

@@ -26,7 +26,7 @@ import numpy as np
 
 from rover_ctl.config import NavigatorParams
 from rover_ctl.fuzzy import load_rulebase
-from rover_ctl.navigator import Navigator
+from rover_ctl.navigation.navigator import Navigator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from navigator.kinematic import PAPER_ORIENTATIONS, Circle, box, drive  # noqa: E402  (test helper, pure)

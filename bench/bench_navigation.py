@@ -28,12 +28,12 @@ from pathlib import Path
 from typing import Any
 
 from rover_ctl.config import PlannerParams, RobotParams
-from rover_ctl.geo import LocalFrame
+from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
 from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
-from rover_ctl.planner import Circle, Planner
-from rover_ctl.report import read_jsonl
-from rover_ctl.sim import SimError, SimOptions, simulate
+from rover_ctl.navigation.planner import Circle, Planner
+from rover_ctl.app.report import read_jsonl
+from rover_ctl.app.sim import SimError, SimOptions, simulate
 
 HOME = (-35.363261, 149.165230, 584.0)
 RULEBASES = ("paper", "default")
@@ -213,7 +213,7 @@ def run(quick: bool) -> dict[str, Any]:
     markdown = "\n".join(lines)
     markdown += (
         "\n\nEach run: `rover-sitl --lockstep` and `rover-ctl run` as processes, the mission uploaded and "
-        f"started over the GCS link (`rover_ctl.sim`), waypoint acceptance radius {ACCEPTANCE_RADIUS_M} m. Success = mission complete, no collision, within "
+        f"started over the GCS link (`rover_ctl.app.sim`), waypoint acceptance radius {ACCEPTANCE_RADIUS_M} m. Success = mission complete, no collision, within "
         f"{TIME_BUDGET_S:.0f} s of sim time. Path / shortest: driven length (truth) over the shortest "
         "collision-free path for the robot's footprint around the true static obstacles (straight legs "
         "for moving ones); it can fall below 1 where the carrot look-ahead and the acceptance radius cut "

@@ -61,7 +61,7 @@ class LinkParams:
 
 @dataclass
 class PlannerParams:
-    """Global planner (``rover_ctl.planner``): visibility graph around fences and known obstacles."""
+    """Global planner (``rover_ctl.navigation.planner``): visibility graph around fences and known obstacles."""
 
     clearance_margin_m: float = 0.5
     """Kept free beyond the robot's half-width: obstacles and exclusion zones are inflated, and
@@ -86,7 +86,7 @@ class PlannerParams:
 
 @dataclass
 class ExecutorParams:
-    """Mission executor (``rover_ctl.executor``), ArduPilot Rover's WP_* / RTL_* counterparts."""
+    """Mission executor (``rover_ctl.autopilot.executor``), ArduPilot Rover's WP_* / RTL_* counterparts."""
 
     acceptance_radius_m: float = 2.0
     """Waypoint reached within this distance when the item's param2 is 0 (ArduPilot WP_RADIUS)."""
@@ -103,7 +103,7 @@ class ExecutorParams:
 
 @dataclass
 class FailsafeParams:
-    """Failsafes (``rover_ctl.failsafe``); docs/failsafes.md gives trigger, action and recovery."""
+    """Failsafes (``rover_ctl.autopilot.failsafe``); docs/failsafes.md gives trigger, action and recovery."""
 
     recovery_s: float = 2.0
     """A failsafe clears only after its cause has been gone this long (hysteresis)."""
@@ -142,7 +142,7 @@ class FailsafeParams:
 
 @dataclass
 class EstimatorParams:
-    """The pose filter (rover_ctl.estimator): sensor noise, gating, recovery and health.
+    """The pose filter (rover_ctl.estimation.estimator): sensor noise, gating, recovery and health.
 
     Noise densities are 1-sigma; a ``..._per_sqrt_s`` figure adds ``value**2 * dt`` of variance
     per ``dt`` seconds of prediction (a random walk)."""
@@ -241,7 +241,7 @@ class GcsParams:
 
 @dataclass
 class WheelControlParams:
-    """Wheel-speed loop and RC mixing (``rover_ctl.wheel_control``)."""
+    """Wheel-speed loop and RC mixing (``rover_ctl.navigation.wheel_control``)."""
 
     full_output_rpm: float = 220.0
     """Wheel speed at full motor output on flat ground: the feed-forward ``u = rpm / this``."""
@@ -265,7 +265,7 @@ class WheelControlParams:
 
 @dataclass
 class DaemonParams:
-    """The control loop (``rover_ctl.daemon``) and its vehicle-link housekeeping."""
+    """The control loop (``rover_ctl.app.daemon``) and its vehicle-link housekeeping."""
 
     control_rate_hz: float = 25.0
     """Control steps per second of vehicle (sensor) time."""
@@ -293,7 +293,7 @@ class DaemonParams:
 
 @dataclass
 class NavigatorParams:
-    """The fuzzy navigator (``rover_ctl.navigator``): geometry and ranges to rule-base inputs."""
+    """The fuzzy navigator (``rover_ctl.navigation.navigator``): geometry and ranges to rule-base inputs."""
 
     paper_range_units_per_m: float = 5.0
     """Scale from metres to the obstacle units of a rule base whose obstacle inputs are not in
@@ -305,7 +305,7 @@ class NavigatorParams:
 
 @dataclass
 class ProximityParams:
-    """The short-term obstacle memory (``rover_ctl.proximity``) between rangefinders and navigator."""
+    """The short-term obstacle memory (``rover_ctl.navigation.proximity``) between rangefinders and navigator."""
 
     memory_s: float = 1.5
     """How long an echo is remembered: long enough to cover the turn that takes an obstacle out of

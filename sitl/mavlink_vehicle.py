@@ -24,8 +24,8 @@ from sitl.endpoints import mavlink
 from sitl.faults import FaultError
 from sitl.mixer import MixerParams, mix_rc
 
-MODE_MANUAL = 0
-MODE_HOLD = 4
+MODE_MANUAL = mavlink.ROVER_MODE_MANUAL
+MODE_HOLD = mavlink.ROVER_MODE_HOLD
 MODES = {MODE_MANUAL: "MANUAL", MODE_HOLD: "HOLD"}
 """ArduPilot Rover custom modes the emulator implements (others are refused)."""
 FORCE_ARM_MAGIC = 21196

@@ -81,7 +81,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def _client(args: argparse.Namespace):
-    from rover_ctl.mission.client import MissionClient
+    from rover_ctl.mavlink.mission_client import MissionClient
 
     params = GcsParams()
     if args.timeout is not None:
@@ -100,7 +100,7 @@ def _run(args: argparse.Namespace, action):
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-    from rover_ctl.mission.client import TYPE_NAMES, MissionClientError
+    from rover_ctl.mavlink.mission_client import TYPE_NAMES, MissionClientError
 
     with _client(args) as client, Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),

@@ -1,4 +1,4 @@
-"""``rover-ctl run``: the controller daemon (see rover_ctl.daemon and docs/daemon.md).
+"""``rover-ctl run``: the controller daemon (see rover_ctl.app.daemon and docs/daemon.md).
 
 Exit codes (sysexits): 0 stopped by SIGINT/SIGTERM, 2 bad flag or config (``rover-ctl`` usage
 errors), 69 no vehicle answered, 70 the control loop failed. A service manager restarts on
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
-    from rover_ctl.daemon import Daemon
+    from rover_ctl.app.daemon import Daemon
     from rover_ctl.fuzzy import RuleBaseError
 
     try:

@@ -45,8 +45,8 @@ def run(args: argparse.Namespace) -> int:
 
     from rover_ctl.cli import UserError
     from rover_ctl.mission.files import MissionFileError
-    from rover_ctl.report import ReportError
-    from rover_ctl.sim import Progress, SimError, SimOptions, simulate
+    from rover_ctl.app.report import ReportError
+    from rover_ctl.app.sim import Progress, SimError, SimOptions, simulate
 
     if args.obstacles is not None and args.obstacles < 0:
         raise UserError(f"--obstacles {args.obstacles}: expected a count >= 0")

@@ -13,38 +13,10 @@ param1 is the vertex count; a circle's param1 is its radius); ``Mission.fence_po
 
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass, field
 
-
-class MissionType(enum.IntEnum):
-    """MAV_MISSION_TYPE."""
-
-    MISSION = 0
-    FENCE = 1
-    RALLY = 2
-
-
-class Cmd(enum.IntEnum):
-    """The MAV_CMD values this package names (the rest stay plain ints)."""
-
-    NAV_WAYPOINT = 16
-    NAV_LOITER_UNLIM = 17
-    NAV_LOITER_TURNS = 18
-    NAV_LOITER_TIME = 19
-    NAV_RETURN_TO_LAUNCH = 20
-    NAV_LAND = 21
-    CONDITION_DELAY = 112
-    DO_JUMP = 177
-    DO_CHANGE_SPEED = 178
-    DO_SET_HOME = 179
-    NAV_FENCE_RETURN_POINT = 5000
-    NAV_FENCE_POLYGON_VERTEX_INCLUSION = 5001
-    NAV_FENCE_POLYGON_VERTEX_EXCLUSION = 5002
-    NAV_FENCE_CIRCLE_INCLUSION = 5003
-    NAV_FENCE_CIRCLE_EXCLUSION = 5004
-    NAV_RALLY_POINT = 5100
+from rover_ctl.vocabulary import Cmd, MissionType
 
 
 SUPPORTED_COMMANDS = frozenset(

@@ -11,9 +11,9 @@ import subprocess
 import pytest
 
 from rover_ctl.cli import main
-from rover_ctl.geo import LocalFrame
-from rover_ctl.report import ReportError, write_report
-from rover_ctl.sim import ROVER_CTL
+from rover_ctl.estimation.frame import LocalFrame
+from rover_ctl.app.report import ReportError, write_report
+from rover_ctl.app.sim import ROVER_CTL
 from support import free_port
 
 HOME = (-35.363261, 149.165230, 584.0)
@@ -106,7 +106,7 @@ def synthetic_run(folder, complete: bool = True):
             truth.append({"t_s": t, "type": "gps", "dropped": False, "err_white_e_m": 0.3, "err_white_n_m": 0.0,
                           "err_bias_e_m": 0.0, "err_bias_n_m": 0.4, "err_glitch_e_m": 0.0, "err_glitch_n_m": 0.0})  # fmt: skip
     (folder / "truth.jsonl").write_text("".join(json.dumps(r) + "\n" for r in truth))
-    from rover_ctl.daemon import CSV_COLUMNS
+    from rover_ctl.app.daemon import CSV_COLUMNS
 
     rows = [",".join(CSV_COLUMNS)]
     for k in range(0, 300):

@@ -13,8 +13,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
-from rover_ctl.link import CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus, decode_range  # noqa: E402
-from rover_ctl.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
+from rover_ctl.mavlink.vehicle import CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus, decode_range  # noqa: E402
+from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from support import free_port  # noqa: E402
 
 mav = mavutil.mavlink

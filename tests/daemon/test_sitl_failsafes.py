@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from rover_ctl.geo import LocalFrame
-from rover_ctl.report import read_jsonl
-from rover_ctl.sim import SimOptions, SimRun
+from rover_ctl.estimation.frame import LocalFrame
+from rover_ctl.app.report import read_jsonl
+from rover_ctl.app.sim import SimOptions, SimRun
 
 ROOT = Path(__file__).resolve().parents[2]
 LOOP = ROOT / "missions" / "cmac_loop.waypoints"
@@ -82,7 +82,7 @@ BOULDER_WORLD = ROOT / "missions" / "worlds" / "boulder_fence.geojson"
 def test_fenced_mission_avoids_the_exclusion_and_a_glitch_breaches_the_fence(tmp_path):
     from shapely.geometry import Point, Polygon
 
-    from rover_ctl.geo import LocalFrame
+    from rover_ctl.estimation.frame import LocalFrame
     from rover_ctl.mission.files import load_mission
 
     out = tmp_path / "run"

@@ -10,15 +10,15 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from rover_ctl.geo import LocalFrame
-from rover_ctl.report import read_jsonl
-from rover_ctl.sim import MODE_HOLD, SimOptions, SimRun, simulate
+from rover_ctl.estimation.frame import LocalFrame
+from rover_ctl.app.report import read_jsonl
+from rover_ctl.app.sim import SimOptions, SimRun, simulate
+from rover_ctl.vocabulary import RoverMode
 
 ROOT = Path(__file__).resolve().parents[2]
 JUMP = ROOT / "missions" / "cmac_jump.waypoints"
 HOME = (-35.363261, 149.165230, 584.0)
 MODE_RTL = 11
-MODE_MANUAL = 0
 
 pytestmark = pytest.mark.sitl
 
@@ -96,8 +96,8 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
         run.start_mission()
         assert run.wait_for(lambda p: 1 in p.reached, sim_timeout_s=60.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False  # get up to speed on the next leg
-        assert run.set_mode(MODE_HOLD) == mavutil.mavlink.MAV_RESULT_ACCEPTED
-        assert run.wait_for(lambda p: p.mode == MODE_HOLD, wall_timeout_s=3.0)  # heartbeats are 1 Hz wall
+        assert run.set_mode(RoverMode.HOLD) == mavutil.mavlink.MAV_RESULT_ACCEPTED
+        assert run.wait_for(lambda p: p.mode == RoverMode.HOLD, wall_timeout_s=3.0)  # heartbeats are 1 Hz wall
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
         assert run.set_mode(MODE_RTL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
         home = LocalFrame(*HOME)
@@ -107,7 +107,7 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
         assert run.wait_for(lambda p: p.position_en is not None and math.dist(p.position_en, (0, 0)) < near_home_m, sim_timeout_s=60.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # settles at home
         # MANUAL: the daemon hands the RC channels back to the radio and stops overriding.
-        assert run.set_mode(MODE_MANUAL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
+        assert run.set_mode(RoverMode.MANUAL) == mavutil.mavlink.MAV_RESULT_ACCEPTED
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
 
     events = read_jsonl(out / "events.jsonl")

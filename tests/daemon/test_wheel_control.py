@@ -7,8 +7,8 @@ import math
 import pytest
 
 from rover_ctl.config import WheelControlParams
-from rover_ctl.readings import WheelDistance
-from rover_ctl.wheel_control import WheelController, WheelSpeedMeter, motors_to_rc, rc_to_motors
+from rover_ctl.estimation.readings import WheelDistance
+from rover_ctl.navigation.wheel_control import WheelController, WheelSpeedMeter, motors_to_rc, rc_to_motors
 
 P = WheelControlParams()
 RADIUS_M = 0.07

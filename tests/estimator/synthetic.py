@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 
-from rover_ctl.geo import LocalFrame, enu_to_compass_rad, wrap_pi
-from rover_ctl.readings import Attitude, GpsFix, WheelDistance
+from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad, wrap_pi
+from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 
 CMAC = LocalFrame(-35.363261, 149.165230, 584.0)
 TRACK_M = 0.32

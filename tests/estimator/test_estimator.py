@@ -12,9 +12,9 @@ from scipy.stats import chi2
 
 from estimator.synthetic import CMAC, TRACK_M, Sensors, feed, simulate
 from rover_ctl.config import EstimatorParams
-from rover_ctl.estimator import GpsVerdict, PoseEstimator, motion_model
-from rover_ctl.geo import wrap_pi
-from rover_ctl.readings import Attitude, GpsFix, WheelDistance
+from rover_ctl.estimation.estimator import GpsVerdict, PoseEstimator, motion_model
+from rover_ctl.estimation.frame import wrap_pi
+from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 
 CONVERGED_S = 10.0
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pyproj import Geod
 
-from rover_ctl.geo import LocalFrame, compass_to_enu_rad, enu_to_compass_rad, wrap_pi
+from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, enu_to_compass_rad, wrap_pi
 
 WGS84 = Geod(ellps="WGS84")
 

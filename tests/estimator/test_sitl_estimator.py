@@ -11,10 +11,10 @@ import pytest
 from support.sitl import lockstep_client, rover_sitl
 
 from rover_ctl.config import EstimatorParams, RobotParams
-from rover_ctl.estimator import GpsVerdict, PoseEstimator
-from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
-from rover_ctl.link import decode_gps
-from rover_ctl.readings import Attitude, WheelDistance
+from rover_ctl.estimation.estimator import GpsVerdict, PoseEstimator
+from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
+from rover_ctl.mavlink.vehicle import decode_gps
+from rover_ctl.estimation.readings import Attitude, WheelDistance
 
 pytestmark = pytest.mark.sitl
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from rover_ctl.config import ExecutorParams
-from rover_ctl.executor import EventKind, MissionExecutor, Mode, Severity
+from rover_ctl.autopilot.executor import EventKind, MissionExecutor, Mode, Severity
 from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, FRAME_MISSION, MissionItem
 
 MAX_SPEED_MPS = 1.5

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from rover_ctl.config import FailsafeParams
-from rover_ctl.failsafe import Action, FailsafeInputs, Failsafes, Severity
+from rover_ctl.autopilot.failsafe import Action, FailsafeInputs, Failsafes, Severity
 
 PARAMS = FailsafeParams(recovery_s=2.0)
 FRESH_RANGES = {0: 0.02, 2: 0.02, 4: 0.02, 6: 0.02}

@@ -1,5 +1,5 @@
 """The project's bundled missions (missions/*.waypoints, *.plan), defined in metres east/north of
-home and converted to latitude/longitude in the daemon's own local frame (``rover_ctl.geo``).
+home and converted to latitude/longitude in the daemon's own local frame (``rover_ctl.estimation.frame``).
 
 ``python tests/mission_files/bundled.py`` rewrites the files with ``save_mission``;
 ``test_bundled.py`` checks that the committed files are exactly what these definitions give.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rover_ctl.geo import LocalFrame
+from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
 from rover_ctl.mission.model import FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT, FRAME_MISSION, Cmd, Home, Mission, MissionItem
 

@@ -10,7 +10,7 @@ import pytest
 from shapely.geometry import LineString, Point, Polygon
 
 from mission_files.bundled import BUNDLED, MISSIONS
-from rover_ctl.geo import LocalFrame
+from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import load_mission, summarize
 from rover_ctl.mission.model import Cmd
 from rover_ctl.mission.plan import format_plan

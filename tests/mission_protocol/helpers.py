@@ -12,7 +12,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
-from rover_ctl.gcs import GcsLink  # noqa: E402
+from rover_ctl.mavlink.gcs import GcsLink  # noqa: E402
 from rover_ctl.mission.model import Home, Mission, MissionItem  # noqa: E402
 
 HOME = Home(-35.363261, 149.165230, 584.0)

@@ -14,10 +14,11 @@ import pytest
 from mission_protocol.helpers import LinkThread
 
 from rover_ctl.config import GcsParams
-from rover_ctl.gcs import DefaultHandlers, RoverMode
+from rover_ctl.mavlink.gcs import DefaultHandlers
+from rover_ctl.vocabulary import RoverMode
 from rover_ctl.mission.files import load_mission, save_mission
 from rover_ctl.mission.model import Mission, MissionItem
-from rover_ctl.mission.service import decode_xy
+from rover_ctl.mavlink.mission import decode_xy
 
 pytestmark = pytest.mark.interop
 

@@ -10,8 +10,9 @@ from mission_protocol.helpers import HOME, MAVPROXY, MAVSDK, LinkThread, expect,
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.config import Config, GcsParams
-from rover_ctl.gcs import CAPABILITIES, DefaultHandlers, GcsLink, RoverMode
-from rover_ctl.mission.client import MissionClient, MissionClientError
+from rover_ctl.mavlink.gcs import CAPABILITIES, DefaultHandlers, GcsLink
+from rover_ctl.vocabulary import RoverMode
+from rover_ctl.mavlink.mission_client import MissionClient, MissionClientError
 from rover_ctl.mission.model import Mission
 from rover_ctl.mission.store import MissionStore
 

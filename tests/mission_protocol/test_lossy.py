@@ -14,9 +14,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from support import free_port
 
 from rover_ctl.config import GcsParams
-from rover_ctl.mission.client import MissionClient, MissionClientError
+from rover_ctl.mavlink.mission_client import MissionClient, MissionClientError
 from rover_ctl.mission.model import Mission, MissionType
-from rover_ctl.mission.service import item_message, wire_items
+from rover_ctl.mavlink.mission import item_message, wire_items
 
 LINK = GcsParams(mission_item_retry_s=0.05, mission_upload_timeout_s=1.0, heartbeat_period_s=0.2)
 CLIENT = GcsParams(client_retry_s=0.05, client_retries=40, client_connect_timeout_s=3.0)

@@ -8,7 +8,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.config import GcsParams
 from rover_ctl.mission.model import Home, Mission, MissionItem, MissionType
-from rover_ctl.mission.service import (
+from rover_ctl.mavlink.mission import (
     MissionService,
     decode_xy,
     encode_xy,

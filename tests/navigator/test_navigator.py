@@ -7,7 +7,7 @@ from navigator.kinematic import PAPER_ORIENTATIONS, Circle, box, drive
 
 from rover_ctl.config import NavigatorParams
 from rover_ctl.fuzzy import RuleBaseError, load_rulebase
-from rover_ctl.navigator import Navigator
+from rover_ctl.navigation.navigator import Navigator
 
 CLEAR6 = {o: math.inf for o in (0, 1, 2, 4, 6, 7)}
 CLEAR4 = {o: math.inf for o in PAPER_ORIENTATIONS}

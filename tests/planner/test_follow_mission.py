@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 
 from rover_ctl.config import ExecutorParams, PlannerParams, RobotParams
-from rover_ctl.executor import EventKind, MissionExecutor
+from rover_ctl.autopilot.executor import EventKind, MissionExecutor
 from rover_ctl.mission.model import MissionItem
-from rover_ctl.planner import Circle, Fence, PathFollower, Planner
+from rover_ctl.navigation.planner import Circle, Fence, PathFollower, Planner
 
 ROBOT = RobotParams()
 DT_S = 0.1

@@ -8,9 +8,9 @@ import pytest
 from shapely.geometry import LineString, Point, Polygon
 
 from rover_ctl.config import PlannerParams, RobotParams
-from rover_ctl.geo import LocalFrame
+from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.model import MissionItem
-from rover_ctl.planner import Circle, Fence, FenceError, Path, PathFollower, Planner
+from rover_ctl.navigation.planner import Circle, Fence, FenceError, Path, PathFollower, Planner
 
 PARAMS = PlannerParams()
 ROBOT = RobotParams()

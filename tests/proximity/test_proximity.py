@@ -7,7 +7,7 @@ import math
 import pytest
 
 from rover_ctl.config import ProximityParams
-from rover_ctl.proximity import ObstacleMemory
+from rover_ctl.navigation.proximity import ObstacleMemory
 
 FRONT, FRONT_RIGHT, RIGHT, BACK, LEFT, FRONT_LEFT = 0, 1, 2, 4, 6, 7
 CLEAR = {o: math.inf for o in (FRONT, FRONT_RIGHT, RIGHT, BACK, LEFT, FRONT_LEFT)}

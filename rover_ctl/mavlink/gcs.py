@@ -10,7 +10,7 @@ What a ground station gets (docs/gcs.md lists it with the tested clients):
 
 * HEARTBEAT at ``heartbeat_period_s``: MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_ARDUPILOTMEGA,
   ArduPilot Rover's custom modes (``RoverMode``), the armed flag and system status.
-* The mission protocol for missions, fences and rally points (``rover_ctl.mission.service``),
+* The mission protocol for missions, fences and rally points (``rover_ctl.mavlink.mission``),
   persisted through ``MissionStore`` so a restarted daemon keeps its mission.
 * COMMAND_LONG / COMMAND_INT, each answered with COMMAND_ACK to the sender: arm/disarm (400),
   DO_SET_MODE (176), MISSION_START (300), NAV_RETURN_TO_LAUNCH (20), DO_SET_MISSION_CURRENT (224),
@@ -23,7 +23,7 @@ What a ground station gets (docs/gcs.md lists it with the tested clients):
 The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT is an int):
 
     state() -> VehicleState                 armed, custom_mode, system_status, home
-    arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: param2 21196)
+    arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: param2 ARM_FORCE_MAGIC)
     set_mode(custom_mode: int) -> int       DO_SET_MODE / SET_MODE (RoverMode numbers)
     mission_start() -> int                  MAV_CMD_MISSION_START
     return_to_launch() -> int               MAV_CMD_NAV_RETURN_TO_LAUNCH
@@ -57,20 +57,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 from rover_ctl import __version__  # noqa: E402
 from rover_ctl.config import Config, GcsParams  # noqa: E402
 from rover_ctl.mission.model import Home, Mission  # noqa: E402
-from rover_ctl.mission.service import MissionService  # noqa: E402
+from rover_ctl.mavlink.mission import MissionService  # noqa: E402
 from rover_ctl.mission.store import MissionStore, StoreError  # noqa: E402
+from rover_ctl.vocabulary import ARM_FORCE_MAGIC, AUTONOMOUS_MODES, RoverMode  # noqa: E402
 
 log = logging.getLogger(__name__)
-
-
-class RoverMode(enum.IntEnum):
-    """ArduPilot Rover's custom_mode numbers (the ones rover_ctl implements)."""
-
-    MANUAL = 0
-    HOLD = 4
-    AUTO = 10
-    RTL = 11
-    GUIDED = 15
 
 
 @dataclass(frozen=True)
@@ -93,8 +84,6 @@ class AutopilotHandlers(Protocol):
     def set_param(self, name: str, value: float) -> bool: ...
 
 
-ARM_FORCE_MAGIC = 21196
-"""param2 of MAV_CMD_COMPONENT_ARM_DISARM that forces arming/disarming (ArduPilot, MAVLink spec)."""
 _FS_ACTIONS = {0: "continue", 1: "rtl", 2: "hold"}
 
 
@@ -454,7 +443,7 @@ class GcsLink:
         base_mode = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
         if state.armed:
             base_mode |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        if state.custom_mode in (RoverMode.AUTO, RoverMode.RTL, RoverMode.GUIDED):
+        if state.custom_mode in AUTONOMOUS_MODES:
             base_mode |= mav.MAV_MODE_FLAG_GUIDED_ENABLED | mav.MAV_MODE_FLAG_AUTO_ENABLED
         self.conn.mav.heartbeat_send(
             mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, state.custom_mode, state.system_status

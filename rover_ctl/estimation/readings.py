@@ -2,7 +2,7 @@
 navigator consume. Plain frozen dataclasses, SI units in the names, no I/O.
 
 Angle conventions: readings keep MAVLink's (yaw 0 = north, positive clockwise, as ATTITUDE and
-GPS course); the pose (``rover_ctl.estimator.Pose``) is in the local ENU frame (heading 0 = east,
+GPS course); the pose (``rover_ctl.estimation.estimator.Pose``) is in the local ENU frame (heading 0 = east,
 positive counter-clockwise). ``time_s`` is always vehicle time (time_boot_ms or time_usec), never
 the wall clock, so a run is the same at any speed-up.
 """

@@ -25,10 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
+from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
+from rover_ctl.vocabulary import RoverMode
 
-MODE_AUTO = 10
-MODE_RTL = 11
 
 
 class ReportError(ValueError):
@@ -106,7 +105,7 @@ class Run:
 
     def active_window(self) -> tuple[float, float]:
         """Sim time from the first AUTO/RTL to mission completion (or the end of the log)."""
-        starts = [e["t_s"] for e in self.events if e["type"] == "mode" and e["mode"] in (MODE_AUTO, MODE_RTL)]
+        starts = [e["t_s"] for e in self.events if e["type"] == "mode" and e["mode"] in (RoverMode.AUTO, RoverMode.RTL)]
         ends = [e["t_s"] for e in self.events if e["type"] == "complete"]
         t = self.control.get("t_s", np.array([0.0]))
         start = starts[0] if starts else float(t[0])

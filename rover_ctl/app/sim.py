@@ -12,7 +12,7 @@ emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: py
 every peer that has spoken, so a second ground station such as MAVProxy can attach to a running
 sim), the watcher UDP.
 
-The report (``rover_ctl.report``) is written into the output folder with both tlogs, the control
+The report (``rover_ctl.app.report``) is written into the output folder with both tlogs, the control
 CSV, the event log, the emulator's truth log and the processes' logs.
 """
 
@@ -35,10 +35,11 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
-from rover_ctl.geo import LocalFrame  # noqa: E402
-from rover_ctl.mission.client import MissionClient  # noqa: E402
+from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
+from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
+from rover_ctl.vocabulary import RoverMode  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
 """The ``rover-ctl`` command of this interpreter."""
@@ -55,8 +56,6 @@ ARM_RETRY_S = 0.2
 STOP_TIMEOUT_S = 10.0
 """Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
 GCS_HEARTBEAT_PERIOD_S = 1.0
-MODE_AUTO = 10
-MODE_HOLD = 4
 
 
 def _copy_lines(stream: Any, path: Path) -> None:
@@ -105,7 +104,7 @@ class Progress:
     reached: set[int] = field(default_factory=set)
     distance_left_m: float = math.nan
     collisions: int = 0
-    mode: int = MODE_HOLD
+    mode: int = RoverMode.HOLD
     armed: bool = False
     system_status: int = 0
     """MAV_STATE of the daemon's heartbeat (CRITICAL while a failsafe holds)."""
@@ -406,7 +405,7 @@ class SimRun:
 
 def simulate(options: SimOptions, on_tick: Callable[[Progress], None] | None = None, plots: bool = True) -> dict[str, Any]:
     """The whole ``rover-ctl sim``: run, stop, report. Returns the metrics."""
-    from rover_ctl.report import write_report
+    from rover_ctl.app.report import write_report
 
     with SimRun(options) as run:
         complete = run.run_mission(on_tick)

@@ -7,7 +7,7 @@ Each turn of the loop
 2. runs a control step when the vehicle (sensor) clock has reached the next tick of
    ``daemon.control_rate_hz``; in lockstep (the vehicle sends TIMESYNC frame markers) the step
    runs at the frame's marker and the marker is answered only after the step's override went out;
-3. polls the GCS link (``rover_ctl.gcs.GcsLink``), for which the daemon is the ``AutopilotHandlers``;
+3. polls the GCS link (``rover_ctl.mavlink.gcs.GcsLink``), for which the daemon is the ``AutopilotHandlers``;
 4. sends telemetry to the GCS and blocks on both sockets for at most ``daemon.idle_wait_s``.
 
 The control step: failsafes -> mode -> (AUTO/RTL) mission executor -> path follower (global
@@ -33,23 +33,24 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.config import Config
-from rover_ctl.estimator import PoseEstimator
-from rover_ctl.executor import NAV_COMMANDS, EventKind, MissionExecutor
-from rover_ctl.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsafes
+from rover_ctl.estimation.estimator import PoseEstimator
+from rover_ctl.autopilot.executor import NAV_COMMANDS, EventKind, MissionExecutor
+from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsafes
 from rover_ctl.fuzzy import load_rulebase
-from rover_ctl.gcs import ConfigParams, GcsLink, RoverMode, VehicleState
-from rover_ctl.geo import LocalFrame, enu_to_compass_rad
-from rover_ctl.link import MODE_MANUAL, Battery, FrameMarker, LinkError, StatusText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
+from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad
+from rover_ctl.vocabulary import ARM_FORCE_MAGIC, RoverMode
+from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText, VehicleLink, VehicleStatus
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
-from rover_ctl.navigator import Navigator
-from rover_ctl.planner import Fence, PathFollower, Planner
-from rover_ctl.proximity import ObstacleMemory
-from rover_ctl.readings import Attitude, GpsFix, RangeReading, WheelDistance
-from rover_ctl.telemetry_log import CsvLog, TlogWriter
-from rover_ctl.wheel_control import WheelCommand, WheelController
+from rover_ctl.navigation.navigator import Navigator
+from rover_ctl.navigation.planner import Fence, PathFollower, Planner
+from rover_ctl.navigation.proximity import ObstacleMemory
+from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
+from rover_ctl.app.logs import CsvLog, TlogWriter
+from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 
-log = logging.getLogger("rover_ctl.daemon")
+log = logging.getLogger("rover_ctl.app.daemon")
 
 # Exit codes (sysexits.h), so that a service manager can tell a bad setup from a crash.
 EXIT_OK = 0
@@ -169,7 +170,7 @@ class Daemon:
             return False
         log.info("vehicle sysid %d found (mode %d, armed %s)", self.link.target_system, self.vehicle.custom_mode, self.vehicle.armed)
         self._request_streams()
-        result = self.link.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MODE_MANUAL)
+        result = self.link.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, RoverMode.MANUAL)
         if not result.accepted:
             log.warning("vehicle refused MANUAL mode (result %d): overrides may be ignored", result.result)
         store_path = cfg.gcs.mission_store_path
@@ -324,7 +325,7 @@ class Daemon:
             return mav.MAV_RESULT_DENIED
         if not arm:
             self.wheels.neutral()
-        params = (1.0 if arm else 0.0, 21196.0 if force else 0.0)
+        params = (1.0 if arm else 0.0, float(ARM_FORCE_MAGIC) if force else 0.0)
         self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params, on_result=self._on_arm_result)
         return mav.MAV_RESULT_ACCEPTED
 
@@ -468,7 +469,7 @@ class Daemon:
         return self._armed() and self.mode in (RoverMode.AUTO, RoverMode.RTL)
 
     def _failsafe(self, t_s: float, pose, vehicle_age_s: float) -> FailsafeDecision:
-        """Measure the ages, ask ``rover_ctl.failsafe``, report its events, apply a mode change."""
+        """Measure the ages, ask ``rover_ctl.autopilot.failsafe``, report its events, apply a mode change."""
         self.clock_s = max(self.clock_s, t_s)
         now = self.clock_s
         gcs_seen = self.gcs.last_gcs_heartbeat_s if self.gcs else None

@@ -41,15 +41,16 @@ from typing import Callable, Sequence
 
 from rover_ctl.config import ExecutorParams
 from rover_ctl.mission.model import MissionItem
+from rover_ctl.vocabulary import Cmd, Severity
 
 EN = tuple[float, float]
 
-NAV_WAYPOINT = 16
-NAV_LOITER_TIME = 19
-NAV_RETURN_TO_LAUNCH = 20
-CONDITION_DELAY = 112
-DO_JUMP = 177
-DO_CHANGE_SPEED = 178
+NAV_WAYPOINT = Cmd.NAV_WAYPOINT
+NAV_LOITER_TIME = Cmd.NAV_LOITER_TIME
+NAV_RETURN_TO_LAUNCH = Cmd.NAV_RETURN_TO_LAUNCH
+CONDITION_DELAY = Cmd.CONDITION_DELAY
+DO_JUMP = Cmd.DO_JUMP
+DO_CHANGE_SPEED = Cmd.DO_CHANGE_SPEED
 JUMP_FOREVER = -1
 NAV_COMMANDS = frozenset({NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH})
 
@@ -69,13 +70,6 @@ class EventKind(enum.Enum):
     STATUSTEXT = "statustext"
     COMPLETE = "complete"
     """The mission is done (a STATUSTEXT too); the rover holds."""
-
-
-class Severity(enum.IntEnum):
-    """MAV_SEVERITY values used here."""
-
-    WARNING = 4
-    INFO = 6
 
 
 @dataclass(frozen=True)

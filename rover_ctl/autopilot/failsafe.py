@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from rover_ctl.config import FailsafeParams
+from rover_ctl.vocabulary import Severity
 
 EN = tuple[float, float]
 
@@ -50,14 +51,6 @@ class Action(enum.IntEnum):
     """Stop and stay (motors commanded to zero speed)."""
     NEUTRAL = 4
     """Motors neutral and hold: no point commanding a vehicle that does not answer."""
-
-
-class Severity(enum.IntEnum):
-    """MAV_SEVERITY values used here."""
-
-    CRITICAL = 2
-    WARNING = 4
-    INFO = 6
 
 
 GCS_ACTIONS = {"continue": Action.NONE, "hold": Action.HOLD, "rtl": Action.RTL}

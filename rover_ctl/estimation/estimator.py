@@ -1,7 +1,7 @@
 """Pose estimation: wheel odometry, gyro, compass and GPS fused by an extended Kalman filter.
 
-No I/O: the filter takes typed readings (``rover_ctl.readings``) stamped with vehicle time and
-returns a ``Pose`` in the local ENU frame (``rover_ctl.geo.LocalFrame``). docs/estimator.md has
+No I/O: the filter takes typed readings (``rover_ctl.estimation.readings``) stamped with vehicle time and
+returns a ``Pose`` in the local ENU frame (``rover_ctl.estimation.frame.LocalFrame``). docs/estimator.md has
 the derivation, the tuning and the measured figures.
 
 State ``x = [e, n, psi, v, b, c, k]``: east and north (m), ENU heading (rad, 0 east, CCW),
@@ -68,8 +68,8 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from rover_ctl.config import EstimatorParams
-from rover_ctl.geo import LocalFrame, compass_to_enu_rad, wrap_pi
-from rover_ctl.readings import Attitude, GpsFix, WheelDistance
+from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
+from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 
 E, N, PSI, V, BIAS, COMPASS, SCALE = range(7)
 _DIM = 7

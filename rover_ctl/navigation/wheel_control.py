@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass
 
 from rover_ctl.config import WheelControlParams
-from rover_ctl.readings import WheelDistance
+from rover_ctl.estimation.readings import WheelDistance
 
 STEERING_UNITS = 4500
 """ArduPilot's steering control_in full scale (centidegrees)."""

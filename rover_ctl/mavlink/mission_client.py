@@ -29,7 +29,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
 from rover_ctl.config import GcsParams  # noqa: E402
 from rover_ctl.mission.model import Mission, MissionItem, MissionType  # noqa: E402
-from rover_ctl.mission.service import item_from_message, item_message, wire_items, with_type  # noqa: E402
+from rover_ctl.mavlink.mission import item_from_message, item_message, wire_items, with_type  # noqa: E402
 
 Progress = Callable[[MissionType, int, int], None]
 """progress(mission_type, items_done, items_total)"""

@@ -6,7 +6,7 @@ It owns one pymavlink connection (serial, udp or tcp connection string) and does
   accepts RC overrides from, SYSID_MYGCS = 255 by default) and find the vehicle's heartbeat;
 * ask for the message rates the daemon needs: SET_MESSAGE_INTERVAL per message, and
   REQUEST_DATA_STREAM(EXTRA1) because ArduPilot only sends WHEEL_DISTANCE in that stream;
-* decode what arrives into typed items (``rover_ctl.readings`` for sensors, the small classes
+* decode what arrives into typed items (``rover_ctl.estimation.readings`` for sensors, the small classes
   below for the rest); frames that fail to parse are counted and dropped;
 * send commands: COMMAND_LONG with COMMAND_ACK (asynchronous with retries, or blocking for
   start-up), RC_CHANNELS_OVERRIDE and the lockstep TIMESYNC answers.
@@ -30,7 +30,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
-from rover_ctl.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
+from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 
 mavlink = mavutil.mavlink
 
@@ -42,10 +42,6 @@ EPOCH_THRESHOLD_US = 10**15
 spec lets the receiver tell the two apart by magnitude."""
 RANGE_CAPPED_CM = 65535
 """What rangefinders report for "nothing seen"; 0 is also used while a sensor starts."""
-
-# ArduPilot Rover's custom modes (ROVER_MODE_*).
-MODE_MANUAL = 0
-MODE_HOLD = 4
 
 
 class LinkError(RuntimeError):

@@ -1,0 +1,1 @@
+"""The autopilot (pure core): modes, mission executor, failsafes and the decision step."""

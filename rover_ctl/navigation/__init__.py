@@ -1,0 +1,1 @@
+"""Navigation (pure core): global planner, obstacle memory, fuzzy navigator, wheel-speed control."""
