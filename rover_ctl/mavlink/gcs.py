@@ -2,28 +2,23 @@
 
 ``GcsLink`` owns one pymavlink connection (``udpin:``, ``udpout:``, ``tcpin:``, ``tcp:``), speaks
 MAVLink 2 (ardupilotmega) as system ``GcsParams.system_id`` component 1, and has no thread: the
-daemon calls ``poll(now_s)`` from its loop, which reads every pending message, dispatches it,
-runs the mission service's timeouts and sends what is due (HEARTBEAT, MISSION_CURRENT).
-``now_s`` is the daemon's clock (monotonic or simulated); only differences are used.
+daemon calls ``poll(now_s)`` from its loop, which reads every pending message, hands it to the
+microservice that owns it, runs the mission service's timeouts and sends what is due (HEARTBEAT,
+MISSION_CURRENT). ``now_s`` is the daemon's clock (monotonic or simulated); only differences are
+used. One module per MAVLink microservice, as MAVSDK is built (docs/gcs.md lists what a ground
+station gets, with the tested clients):
 
-What a ground station gets (docs/gcs.md lists it with the tested clients):
-
-* HEARTBEAT at ``heartbeat_period_s``: MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_ARDUPILOTMEGA,
-  ArduPilot Rover's custom modes (``RoverMode``), the armed flag and system status.
-* The mission protocol for missions, fences and rally points (``rover_ctl.mavlink.mission``),
-  persisted through ``MissionStore`` so a restarted daemon keeps its mission.
-* COMMAND_LONG / COMMAND_INT, each answered with COMMAND_ACK to the sender: arm/disarm (400),
-  DO_SET_MODE (176), MISSION_START (300), NAV_RETURN_TO_LAUNCH (20), DO_SET_MISSION_CURRENT (224),
-  REQUEST_MESSAGE (512) and REQUEST_AUTOPILOT_CAPABILITIES (520) for AUTOPILOT_VERSION and
-  HOME_POSITION, GET_HOME_POSITION (410), SET_MESSAGE_INTERVAL (511); anything else
-  MAV_RESULT_UNSUPPORTED. SET_MODE messages too.
-* REQUEST_DATA_STREAM and SET_MESSAGE_INTERVAL set the rates of the telemetry senders.
-* PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET on the handlers' parameter table.
+* ``rover_ctl.mavlink.telemetry``: HEARTBEAT, GLOBAL_POSITION_INT, GPS_RAW_INT, ATTITUDE,
+  SYS_STATUS, STATUSTEXT, and the rates ground stations ask for;
+* ``rover_ctl.mavlink.commands``: COMMAND_LONG / COMMAND_INT / SET_MODE with COMMAND_ACK;
+* ``rover_ctl.mavlink.mission``: the mission protocol for missions, fences and rally points,
+  persisted through ``MissionStore`` so a restarted daemon keeps its mission;
+* ``rover_ctl.mavlink.params``: the parameter protocol.
 
 The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT is an int):
 
     state() -> VehicleState                 armed, custom_mode, system_status, home
-    arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: param2 ARM_FORCE_MAGIC)
+    arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: ARM_FORCE_MAGIC)
     set_mode(custom_mode: int) -> int       DO_SET_MODE / SET_MODE (RoverMode numbers)
     mission_start() -> int                  MAV_CMD_MISSION_START
     return_to_launch() -> int               MAV_CMD_NAV_RETURN_TO_LAUNCH
@@ -32,34 +27,26 @@ The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT 
     params() -> dict[str, float]            the parameter table, in a stable order
     set_param(name: str, value: float) -> bool
 
-``DefaultHandlers`` implements it in memory (tests, and a base for the daemon); ``ConfigParams``
-maps a few ArduPilot parameter names onto the daemon's ``Config``.
-
-Telemetry senders (``send_global_position_int``, ``send_gps_raw_int``, ``send_attitude``,
-``send_sys_status``) may be called every loop: each sends only when its message is due at the
-rate the ground station asked for (default rates in ``GcsParams``) and returns whether it sent.
-``send_mission_item_reached`` and ``send_statustext`` always send.
+``DefaultHandlers`` implements it in memory (tests, and a base for the daemon).
 """
 
 from __future__ import annotations
 
-import enum
 import logging
-import math
-import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol
 
-os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil  # noqa: E402  (MAVLINK20 must be set before the import)
-from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
+from pymavlink import mavutil
 
-from rover_ctl import __version__  # noqa: E402
-from rover_ctl.config import Config, GcsParams  # noqa: E402
-from rover_ctl.mission.model import Home, Mission  # noqa: E402
-from rover_ctl.mavlink.mission import MissionService  # noqa: E402
-from rover_ctl.mission.store import MissionStore, StoreError  # noqa: E402
-from rover_ctl.vocabulary import ARM_FORCE_MAGIC, AUTONOMOUS_MODES, RoverMode  # noqa: E402
+from rover_ctl.config import Config, GcsParams
+from rover_ctl.mavlink import commands, params
+from rover_ctl.mavlink.commands import CommandService
+from rover_ctl.mavlink.mission import MissionService
+from rover_ctl.mavlink.params import ConfigParams, ParamService
+from rover_ctl.mavlink.telemetry import Telemetry
+from rover_ctl.mission.model import Home, Mission
+from rover_ctl.mission.store import MissionStore, StoreError
+from rover_ctl.vocabulary import RoverMode, mav
 
 log = logging.getLogger(__name__)
 
@@ -82,49 +69,6 @@ class AutopilotHandlers(Protocol):
     def mission_changed(self, mission: Mission, mission_type: int) -> None: ...
     def params(self) -> dict[str, float]: ...
     def set_param(self, name: str, value: float) -> bool: ...
-
-
-_FS_ACTIONS = {0: "continue", 1: "rtl", 2: "hold"}
-
-
-class ConfigParams:
-    """ArduPilot-named parameters backed by the daemon's ``Config``.
-
-    SYSID_THISMAV (read-only here: it takes a restart), WP_RADIUS (executor.acceptance_radius_m),
-    WP_SPEED (executor.cruise_speed_mps), RTL_SPEED (executor.rtl_speed_mps), FS_GCS_TIMEOUT
-    (failsafe.gcs_timeout_s), FS_ACTION (failsafe.gcs_action: 0 continue, 1 RTL, 2 hold).
-    """
-
-    def __init__(self, config: Config) -> None:
-        self.config = config
-        ex, fs = config.executor, config.failsafe
-        self._fields: dict[str, tuple[object, str]] = {
-            "WP_RADIUS": (ex, "acceptance_radius_m"),
-            "WP_SPEED": (ex, "cruise_speed_mps"),
-            "RTL_SPEED": (ex, "rtl_speed_mps"),
-            "FS_GCS_TIMEOUT": (fs, "gcs_timeout_s"),
-        }
-
-    def params(self) -> dict[str, float]:
-        values = {"SYSID_THISMAV": float(self.config.gcs.system_id)}
-        values.update({name: float(getattr(obj, attr)) for name, (obj, attr) in self._fields.items()})
-        actions = {v: k for k, v in _FS_ACTIONS.items()}
-        values["FS_ACTION"] = float(actions.get(self.config.failsafe.gcs_action, 0))
-        return values
-
-    def set_param(self, name: str, value: float) -> bool:
-        if not math.isfinite(value):
-            return False
-        if name in self._fields:
-            if value < 0:
-                return False
-            obj, attr = self._fields[name]
-            setattr(obj, attr, value)
-            return True
-        if name == "FS_ACTION" and int(value) == value and int(value) in _FS_ACTIONS:
-            self.config.failsafe.gcs_action = _FS_ACTIONS[int(value)]
-            return True
-        return False
 
 
 class DefaultHandlers:
@@ -176,67 +120,6 @@ class DefaultHandlers:
         return self.table.set_param(name, value)
 
 
-# Telemetry the senders rate-limit, by MAVLink message id.
-_TELEMETRY = {
-    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "position_rate_hz",
-    mav.MAVLINK_MSG_ID_GPS_RAW_INT: "gps_rate_hz",
-    mav.MAVLINK_MSG_ID_ATTITUDE: "attitude_rate_hz",
-    mav.MAVLINK_MSG_ID_SYS_STATUS: "sys_status_rate_hz",
-    mav.MAVLINK_MSG_ID_MISSION_CURRENT: "mission_current_rate_hz",
-}
-# REQUEST_DATA_STREAM stream -> our messages in it (as ArduPilot groups them).
-_STREAMS = {
-    mav.MAV_DATA_STREAM_EXTENDED_STATUS: (
-        mav.MAVLINK_MSG_ID_SYS_STATUS, mav.MAVLINK_MSG_ID_GPS_RAW_INT, mav.MAVLINK_MSG_ID_MISSION_CURRENT,
-    ),
-    mav.MAV_DATA_STREAM_POSITION: (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,),
-    mav.MAV_DATA_STREAM_EXTRA1: (mav.MAVLINK_MSG_ID_ATTITUDE,),
-}  # fmt: skip
-_STREAMS[mav.MAV_DATA_STREAM_ALL] = tuple(_TELEMETRY)
-
-CAPABILITIES = (
-    mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-    | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
-)
-"""What AUTOPILOT_VERSION claims: only what this link implements."""
-FIRMWARE_VERSION_TYPE_DEV = 0
-STATUSTEXT_CHUNK = 50
-"""STATUSTEXT carries 50 characters; longer texts go out in chunks sharing an id (MAVLink 2)."""
-
-
-def _software_version() -> int:
-    """AUTOPILOT_VERSION.flight_sw_version: major, minor, patch, type in the four bytes."""
-    parts = [int(p) if p.isdigit() else 0 for p in __version__.split(".")[:3]] + [0, 0, 0]
-    return (parts[0] << 24) | (parts[1] << 16) | (parts[2] << 8) | FIRMWARE_VERSION_TYPE_DEV
-
-
-@dataclass
-class _Rates:
-    """Per-message send intervals (None = off) and when each was last sent."""
-
-    interval_s: dict[int, float | None] = field(default_factory=dict)
-    last_s: dict[int, float] = field(default_factory=dict)
-
-    def pending(self, msg_id: int, now_s: float) -> bool:
-        """Whether the message is due now (without taking its slot)."""
-        interval = self.interval_s.get(msg_id)
-        if interval is None:
-            return False
-        last = self.last_s.get(msg_id)
-        return last is None or now_s - last >= interval
-
-    def due(self, msg_id: int, now_s: float) -> bool:
-        """Whether the message is due now; if so, its slot is taken."""
-        if not self.pending(msg_id, now_s):
-            return False
-        self.last_s[msg_id] = now_s
-        return True
-
-
 class GcsLink:
     """The daemon's GCS link (see the module docstring)."""
 
@@ -253,11 +136,9 @@ class GcsLink:
         self.store_error: str | None = None
         """Why the stored mission could not be loaded (the file was moved aside), if it could not."""
         self._changed_type = 0
-        self.rates = _Rates({msg_id: self._default_interval(msg_id) for msg_id in _TELEMETRY})
         self.last_gcs_heartbeat_s: float | None = None
         """When a ground station's HEARTBEAT last arrived (for the GCS failsafe)."""
         self._next_heartbeat_s: float | None = None
-        self._statustext_id = 0
         self.conn = mavutil.mavlink_connection(
             url,
             source_system=self.params.system_id,
@@ -268,6 +149,9 @@ class GcsLink:
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
         mission = self._load_store()
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
+        self.telemetry = Telemetry(self.conn, self.params)
+        self.commands = CommandService(self.conn, self.handlers, self.service, self.telemetry, self.home)
+        self.param_service = ParamService(self.conn, self.handlers)
         if mission.items or mission.fence or mission.rally:
             self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
 
@@ -287,7 +171,7 @@ class GcsLink:
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = now_s + self.params.heartbeat_period_s
             self.send_heartbeat()
-        if self.rates.due(mav.MAVLINK_MSG_ID_MISSION_CURRENT, now_s):
+        if self.telemetry.rates.due(mav.MAVLINK_MSG_ID_MISSION_CURRENT, now_s):
             self.conn.mav.send(self.service.mission_current())
 
     def _dispatch(self, msg, now_s: float) -> None:
@@ -309,31 +193,12 @@ class GcsLink:
             return
         if getattr(msg, "target_system", 0) not in (0, self.params.system_id):
             return
-        sender = (msg.get_srcSystem(), msg.get_srcComponent())
-        if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self._on_command(msg, sender)
-        elif kind == "SET_MODE":
-            self.handlers.set_mode(msg.custom_mode)
+        if kind in commands.HANDLED:
+            self.commands.handle(msg)
         elif kind == "REQUEST_DATA_STREAM":
-            rate = msg.req_message_rate if msg.start_stop else 0
-            for msg_id in _STREAMS.get(msg.req_stream_id, ()):
-                self.rates.interval_s[msg_id] = 1.0 / rate if rate > 0 else None
-        elif kind == "PARAM_REQUEST_LIST":
-            table = self.handlers.params()
-            for index, name in enumerate(table):
-                self._send_param(name, table, index)
-        elif kind == "PARAM_REQUEST_READ":
-            table = self.handlers.params()
-            names = list(table)
-            name = msg.param_id if msg.param_index < 0 else (names[msg.param_index] if msg.param_index < len(names) else None)
-            if name in table:
-                self._send_param(name, table)
-        elif kind == "PARAM_SET":
-            if self.handlers.set_param(msg.param_id, msg.param_value):
-                log.info("parameter %s set to %g", msg.param_id, msg.param_value)
-            table = self.handlers.params()  # echo the value in force, as ArduPilot does
-            if msg.param_id in table:
-                self._send_param(msg.param_id, table)
+            self.telemetry.on_request_data_stream(msg)
+        elif kind in params.HANDLED:
+            self.param_service.handle(msg)
 
     def _commit(self, mission: Mission, mission_type: int) -> None:
         if self.store is not None:
@@ -352,151 +217,37 @@ class GcsLink:
             log.error("%s", self.store_error)
             return Mission()
 
-    def _default_interval(self, msg_id: int) -> float | None:
-        rate_hz = getattr(self.params, _TELEMETRY[msg_id])
-        return 1.0 / rate_hz if rate_hz > 0 else None
-
     def _send_all(self, messages: list) -> None:
         for message in messages:
             self.conn.mav.send(message)
 
-    # ---------------------------------------------------------------- commands
-
-    def _on_command(self, msg, sender: tuple[int, int]) -> None:
-        command = msg.command
-        h = self.handlers
-        followup = None
-        if command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
-            result = h.arm(msg.param1 == 1, round(msg.param2) == ARM_FORCE_MAGIC)
-        elif command == mav.MAV_CMD_DO_SET_MODE:
-            result = h.set_mode(int(msg.param2))
-        elif command == mav.MAV_CMD_MISSION_START:
-            result = h.mission_start()
-        elif command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            result = h.return_to_launch()
-        elif command == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
-            replies = self.service.request_current(int(msg.param1))
-            ok = replies[0].get_type() == "MISSION_CURRENT"
-            result = mav.MAV_RESULT_ACCEPTED if ok else mav.MAV_RESULT_DENIED
-            followup = replies[0] if ok else None
-        elif command in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = int(msg.param1) if command == mav.MAV_CMD_REQUEST_MESSAGE else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
-            result, followup = self._requested(msg_id)
-        elif command == mav.MAV_CMD_GET_HOME_POSITION:
-            result, followup = self._requested(mav.MAVLINK_MSG_ID_HOME_POSITION)
-        elif command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_interval(int(msg.param1), msg.param2)
-        else:
-            result = mav.MAV_RESULT_UNSUPPORTED
-        self.conn.mav.send(mav.MAVLink_command_ack_message(command, result, 0, 0, sender[0], sender[1]))
-        if followup is not None:
-            self.conn.mav.send(followup)
-
-    def _requested(self, msg_id: int):
-        if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            return mav.MAV_RESULT_ACCEPTED, self.autopilot_version()
-        if msg_id == mav.MAVLINK_MSG_ID_HOME_POSITION:
-            home = self.home()
-            if home is None:
-                return mav.MAV_RESULT_FAILED, None
-            return mav.MAV_RESULT_ACCEPTED, self.home_position(home)
-        return mav.MAV_RESULT_UNSUPPORTED, None
-
-    def _set_interval(self, msg_id: int, interval_us: float) -> int:
-        if msg_id not in _TELEMETRY:
-            return mav.MAV_RESULT_DENIED
-        if interval_us == 0:
-            self.rates.interval_s[msg_id] = self._default_interval(msg_id)
-        elif interval_us < 0:
-            self.rates.interval_s[msg_id] = None
-        else:
-            self.rates.interval_s[msg_id] = interval_us * 1e-6
-        return mav.MAV_RESULT_ACCEPTED
-
-    def _send_param(self, name: str, table: dict[str, float], index: int | None = None) -> None:
-        if index is None:
-            index = list(table).index(name)
-        self.conn.mav.param_value_send(
-            name.encode(), table[name], mav.MAV_PARAM_TYPE_REAL32, len(table), index
-        )
-
-    # ---------------------------------------------------------------- messages
+    # ---------------------------------------------------------------- what the daemon sends
 
     def home(self) -> Home | None:
         """The vehicle's home if the daemon has one, else the stored mission's planned home."""
         return self.handlers.state().home or self.service.mission.home
 
-    def autopilot_version(self):
-        return mav.MAVLink_autopilot_version_message(
-            CAPABILITIES, _software_version(), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18
-        )
-
-    @staticmethod
-    def home_position(home: Home):
-        return mav.MAVLink_home_position_message(
-            round(home.lat_deg * 1e7), round(home.lon_deg * 1e7), round(home.alt_m * 1000),
-            0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0,
-        )  # fmt: skip
-
     def send_heartbeat(self) -> None:
         state = self.handlers.state()
-        base_mode = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        if state.armed:
-            base_mode |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        if state.custom_mode in AUTONOMOUS_MODES:
-            base_mode |= mav.MAV_MODE_FLAG_GUIDED_ENABLED | mav.MAV_MODE_FLAG_AUTO_ENABLED
-        self.conn.mav.heartbeat_send(
-            mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, state.custom_mode, state.system_status
-        )
-
-    def send_global_position_int(
-        self, now_s: float, lat_deg: float, lon_deg: float, alt_m: float, relative_alt_m: float,
-        ve_mps: float, vn_mps: float, heading_deg: float, time_boot_ms: int,
-    ) -> bool:  # fmt: skip
-        """GLOBAL_POSITION_INT from the fused estimate (heading: compass degrees, 0 north)."""
-        if not self.rates.due(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, now_s):
-            return False
-        self.conn.mav.global_position_int_send(
-            time_boot_ms, round(lat_deg * 1e7), round(lon_deg * 1e7), round(alt_m * 1000),
-            round(relative_alt_m * 1000), round(vn_mps * 100), round(ve_mps * 100), 0,
-            round((heading_deg % 360.0) * 100) % 36000,
-        )  # fmt: skip
-        return True
-
-    def send_gps_raw_int(self, now_s: float, msg) -> bool:
-        """Forward the vehicle's GPS_RAW_INT (a pymavlink message) as ours."""
-        if not self.rates.due(mav.MAVLINK_MSG_ID_GPS_RAW_INT, now_s):
-            return False
-        self.conn.mav.send(msg)
-        return True
+        self.telemetry.send_heartbeat(state.armed, state.custom_mode, state.system_status)
 
     def pose_due(self, now_s: float) -> bool:
-        """Whether GLOBAL_POSITION_INT or ATTITUDE would go out now, so that a caller polling every
-        loop turn computes the pose for them only a few times a second."""
-        return any(self.rates.pending(m, now_s) for m in (mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mav.MAVLINK_MSG_ID_ATTITUDE))
+        return self.telemetry.pose_due(now_s)
+
+    def send_global_position_int(self, now_s: float, *args) -> bool:
+        return self.telemetry.send_global_position_int(now_s, *args)
+
+    def send_gps_raw_int(self, now_s: float, msg) -> bool:
+        return self.telemetry.send_gps_raw_int(now_s, msg)
 
     def send_attitude(self, now_s: float, yaw_rad_ned: float, yawspeed_radps: float, time_boot_ms: int) -> bool:
-        """ATTITUDE with the estimate's heading (NED: 0 north, clockwise positive)."""
-        if not self.rates.due(mav.MAVLINK_MSG_ID_ATTITUDE, now_s):
-            return False
-        yaw = math.remainder(yaw_rad_ned, 2.0 * math.pi)
-        self.conn.mav.attitude_send(time_boot_ms, 0.0, 0.0, yaw, 0.0, 0.0, yawspeed_radps)
-        return True
+        return self.telemetry.send_attitude(now_s, yaw_rad_ned, yawspeed_radps, time_boot_ms)
 
-    def send_sys_status(self, now_s: float, voltage_v: float, remaining_pct: int, present: int = 0,
-                        enabled: int | None = None, failed: int = 0) -> bool:
-        """SYS_STATUS with the battery (``remaining_pct`` -1 when unknown) and MAV_SYS_STATUS_*
-        sensor bits. As ArduPilot reports them, a bit is healthy unless it is in ``failed``, and
-        the GEOFENCE bit is healthy whenever the fence is not breached: ground stations (MAVProxy)
-        announce a breach when that health bit is clear."""
-        if not self.rates.due(mav.MAVLINK_MSG_ID_SYS_STATUS, now_s):
-            return False
-        health = (present | mav.MAV_SYS_STATUS_GEOFENCE) & ~failed & 0xFFFFFFFF
-        self.conn.mav.sys_status_send(
-            present, present if enabled is None else enabled, health, 0, round(voltage_v * 1000), -1, remaining_pct,
-            0, 0, 0, 0, 0, 0,
-        )  # fmt: skip
-        return True
+    def send_sys_status(self, now_s: float, voltage_v: float, remaining_pct: int, **bits: int) -> bool:
+        return self.telemetry.send_sys_status(now_s, voltage_v, remaining_pct, **bits)
+
+    def send_statustext(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+        self.telemetry.send_statustext(text, severity)
 
     def send_mission_current(self, seq: int, mission_state: int = mav.MISSION_STATE_ACTIVE) -> None:
         """The executor moved to wire seq ``seq``: record it and tell the ground station now."""
@@ -505,15 +256,3 @@ class GcsLink:
 
     def send_mission_item_reached(self, seq: int) -> None:
         self.conn.mav.send(self.service.item_reached(seq))
-
-    def send_statustext(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
-        data = text.encode("utf-8", "replace")
-        if len(data) <= STATUSTEXT_CHUNK:
-            self.conn.mav.statustext_send(severity, data, 0, 0)
-            return
-        self._statustext_id = self._statustext_id % 65535 + 1
-        chunks = [data[i : i + STATUSTEXT_CHUNK] for i in range(0, len(data), STATUSTEXT_CHUNK)]
-        if len(chunks[-1]) == STATUSTEXT_CHUNK:
-            chunks.append(b"")  # a full last chunk needs an empty one to end the text
-        for index, chunk in enumerate(chunks):
-            self.conn.mav.statustext_send(severity, chunk, self._statustext_id, index)

@@ -10,7 +10,8 @@ from mission_protocol.helpers import HOME, MAVPROXY, MAVSDK, LinkThread, expect,
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.config import Config, GcsParams
-from rover_ctl.mavlink.gcs import CAPABILITIES, DefaultHandlers, GcsLink
+from rover_ctl.mavlink.commands import CAPABILITIES
+from rover_ctl.mavlink.gcs import DefaultHandlers, GcsLink
 from rover_ctl.vocabulary import RoverMode
 from rover_ctl.mavlink.mission_client import MissionClient, MissionClientError
 from rover_ctl.mission.model import Mission
@@ -202,11 +203,11 @@ def test_data_stream_and_message_interval_set_telemetry_rates(url):
         assert link.send_global_position_int(0.0, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 0)
         assert not link.send_global_position_int(0.1, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 100)  # 4 Hz default
         assert link.send_global_position_int(0.25, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 250)
-        link._set_interval(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000)  # 20 Hz
+        link.telemetry.set_interval(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000)  # 20 Hz
         assert link.send_global_position_int(0.31, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 310)
-        link._set_interval(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, -1)
+        link.telemetry.set_interval(mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, -1)
         assert not link.send_global_position_int(9.0, -35.0, 149.0, 584.0, 0.0, 0.0, 0.0, 90.0, 9000)
-        assert link._set_interval(mav.MAVLINK_MSG_ID_BATTERY_STATUS, 1000) == mav.MAV_RESULT_DENIED
+        assert link.telemetry.set_interval(mav.MAVLINK_MSG_ID_BATTERY_STATUS, 1000) == mav.MAV_RESULT_DENIED
     finally:
         link.close()
 
@@ -218,7 +219,7 @@ def test_request_data_stream_over_the_wire(url, udp_port):
         conn.mav.request_data_stream_send(1, 1, mav.MAV_DATA_STREAM_POSITION, 0, 0)
         conn.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, mav.MAVLINK_MSG_ID_SYS_STATUS, 200_000, 0, 0, 0, 0, 0)
         expect(conn, "COMMAND_ACK", command=mav.MAV_CMD_SET_MESSAGE_INTERVAL, result=mav.MAV_RESULT_ACCEPTED)
-        rates = lt.link.rates.interval_s
+        rates = lt.link.telemetry.rates.interval_s
         assert rates[mav.MAVLINK_MSG_ID_ATTITUDE] == pytest.approx(0.04)
         assert rates[mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT] is None
         assert rates[mav.MAVLINK_MSG_ID_SYS_STATUS] == pytest.approx(0.2)

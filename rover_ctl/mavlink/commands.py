@@ -1,0 +1,102 @@
+"""The command microservice on the GCS link: COMMAND_LONG / COMMAND_INT and SET_MODE.
+
+Each command is answered with COMMAND_ACK to its sender: arm/disarm, DO_SET_MODE, MISSION_START,
+NAV_RETURN_TO_LAUNCH, DO_SET_MISSION_CURRENT, REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES
+(AUTOPILOT_VERSION, HOME_POSITION), GET_HOME_POSITION, SET_MESSAGE_INTERVAL; anything else
+MAV_RESULT_UNSUPPORTED. What a command does is the autopilot handlers' decision.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from rover_ctl import __version__
+from rover_ctl.mission.model import Home
+from rover_ctl.vocabulary import ARM_FORCE_MAGIC, mav
+
+HANDLED = ("COMMAND_LONG", "COMMAND_INT", "SET_MODE")
+CAPABILITIES = (
+    mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+)
+"""What AUTOPILOT_VERSION claims: only what this link implements."""
+FIRMWARE_VERSION_TYPE_DEV = 0
+
+
+def software_version() -> int:
+    """AUTOPILOT_VERSION.flight_sw_version: major, minor, patch, type in the four bytes."""
+    parts = [int(p) if p.isdigit() else 0 for p in __version__.split(".")[:3]] + [0, 0, 0]
+    return (parts[0] << 24) | (parts[1] << 16) | (parts[2] << 8) | FIRMWARE_VERSION_TYPE_DEV
+
+
+def autopilot_version():
+    return mav.MAVLink_autopilot_version_message(
+        CAPABILITIES, software_version(), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18
+    )
+
+
+def home_position(home: Home):
+    return mav.MAVLink_home_position_message(
+        round(home.lat_deg * 1e7), round(home.lon_deg * 1e7), round(home.alt_m * 1000),
+        0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0,
+    )  # fmt: skip
+
+
+class CommandService:
+    """Dispatches commands to the handlers; ``mission`` is the MissionService (set current),
+    ``telemetry`` the rate owner (SET_MESSAGE_INTERVAL), ``home()`` the home to report."""
+
+    def __init__(self, conn: Any, handlers: Any, mission: Any, telemetry: Any, home: Callable[[], Home | None]) -> None:
+        self.conn = conn
+        self.handlers = handlers
+        self.mission = mission
+        self.telemetry = telemetry
+        self.home = home
+
+    def handle(self, msg) -> None:
+        if msg.get_type() == "SET_MODE":
+            self.handlers.set_mode(msg.custom_mode)
+            return
+        sender = (msg.get_srcSystem(), msg.get_srcComponent())
+        command = msg.command
+        h = self.handlers
+        followup = None
+        if command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            result = h.arm(msg.param1 == 1, round(msg.param2) == ARM_FORCE_MAGIC)
+        elif command == mav.MAV_CMD_DO_SET_MODE:
+            result = h.set_mode(int(msg.param2))
+        elif command == mav.MAV_CMD_MISSION_START:
+            result = h.mission_start()
+        elif command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            result = h.return_to_launch()
+        elif command == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
+            replies = self.mission.request_current(int(msg.param1))
+            ok = replies[0].get_type() == "MISSION_CURRENT"
+            result = mav.MAV_RESULT_ACCEPTED if ok else mav.MAV_RESULT_DENIED
+            followup = replies[0] if ok else None
+        elif command in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            msg_id = int(msg.param1) if command == mav.MAV_CMD_REQUEST_MESSAGE else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            result, followup = self._requested(msg_id)
+        elif command == mav.MAV_CMD_GET_HOME_POSITION:
+            result, followup = self._requested(mav.MAVLINK_MSG_ID_HOME_POSITION)
+        elif command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result = self.telemetry.set_interval(int(msg.param1), msg.param2)
+        else:
+            result = mav.MAV_RESULT_UNSUPPORTED
+        self.conn.mav.send(mav.MAVLink_command_ack_message(command, result, 0, 0, sender[0], sender[1]))
+        if followup is not None:
+            self.conn.mav.send(followup)
+
+    def _requested(self, msg_id: int):
+        if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return mav.MAV_RESULT_ACCEPTED, autopilot_version()
+        if msg_id == mav.MAVLINK_MSG_ID_HOME_POSITION:
+            home = self.home()
+            if home is None:
+                return mav.MAV_RESULT_FAILED, None
+            return mav.MAV_RESULT_ACCEPTED, home_position(home)
+        return mav.MAV_RESULT_UNSUPPORTED, None
