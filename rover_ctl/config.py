@@ -316,6 +316,18 @@ class ProximityParams:
 
 
 @dataclass
+class AutopilotParams:
+    """Modes and arming (``rover_ctl.autopilot``), ArduPilot Rover's LOIT_* / ARMING_* counterparts."""
+
+    loiter_radius_m: float = 2.0
+    """LOITER (and a GUIDED rover that has arrived) drives back once pushed farther than this from
+    its point, until within half of it (ArduPilot LOIT_RADIUS)."""
+    arming_max_distance_m: float = 1000.0
+    """Pre-arm: a mission whose first waypoint, or a fence whose nearest point, is farther than this
+    from home was made for another place: arming is refused."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here."""
 
@@ -330,6 +342,7 @@ class Config:
     gcs: GcsParams = field(default_factory=GcsParams)
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
     proximity: ProximityParams = field(default_factory=ProximityParams)
+    autopilot: AutopilotParams = field(default_factory=AutopilotParams)
 
 
 def _coerce(value: Any, current: Any, where: str) -> Any:

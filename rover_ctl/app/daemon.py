@@ -1,23 +1,27 @@
-"""The controller daemon: one single-threaded loop wiring the links to the pure core.
+"""The controller daemon: one single-threaded loop around the pure autopilot, with the links and the logs.
 
 Each turn of the loop
 
-1. reads the vehicle link and feeds every reading to the estimator (wheel distances also to the
-   wheel-speed meter; the latest range per orientation is kept; SIMSTATE truth only goes to the tlog);
-2. runs a control step when the vehicle (sensor) clock has reached the next tick of
-   ``daemon.control_rate_hz``; in lockstep (the vehicle sends TIMESYNC frame markers) the step
-   runs at the frame's marker and the marker is answered only after the step's override went out;
-3. polls the GCS link (``rover_ctl.mavlink.gcs.GcsLink``), for which the daemon is the ``AutopilotHandlers``;
+1. reads the vehicle link: wheel distances, attitude and GPS go to the estimator (wheel distances
+   also to the autopilot's wheel-speed meter), the latest range per orientation is kept, the
+   vehicle's armed flag goes to the autopilot; SIMSTATE truth only goes to the tlog;
+2. runs ``Autopilot.step`` when the vehicle (sensor) clock has reached the next tick of
+   ``daemon.control_rate_hz``, sends its command (RC override, release, or neutral) and applies
+   its events (STATUSTEXT, MISSION_CURRENT, MISSION_ITEM_REACHED on the GCS link, arm requests to
+   the vehicle, the event log); in lockstep (the vehicle sends TIMESYNC frame markers) the step runs
+   at the frame's marker and the marker is answered only after the step's override went out;
+3. polls the GCS link (``rover_ctl.mavlink.gcs.GcsLink``), for which the daemon is the
+   ``AutopilotHandlers``: each request is the autopilot's decision, its events applied at once (a
+   refusal's STATUSTEXT goes out before the COMMAND_ACK);
 4. sends telemetry to the GCS and blocks on both sockets for at most ``daemon.idle_wait_s``.
 
-The control step: failsafes -> mode -> (AUTO/RTL) mission executor -> path follower (global
-planner, carrot) -> fuzzy navigator -> wheel-speed PI -> RC override. MANUAL hands the RC channels
-back to the vehicle's radio; HOLD, disarmed and failsafe holds send neutral. The vehicle itself is
-kept in MANUAL mode: every autonomous behaviour is the daemon's.
+Every decision is the autopilot's (``rover_ctl.autopilot``); the vehicle itself is kept in MANUAL
+mode and steered with RC overrides.
 
-Time: every decision uses vehicle time (message timestamps) so a run is the same at any speed-up.
-The wall clock serves link housekeeping and one failsafe: a silent vehicle link cannot advance
-vehicle time, so its silence is measured on the wall clock.
+Time: the autopilot decides on vehicle time (message timestamps), so a run is the same at any
+speed-up; the GCS heartbeat's age too is measured in vehicle time (the vehicle time at which the
+daemon received it). The wall clock serves link housekeeping and one failsafe: a silent vehicle
+link cannot advance vehicle time, so its silence is measured on the wall clock.
 """
 
 from __future__ import annotations
@@ -30,25 +34,19 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pymavlink.dialects.v20 import ardupilotmega as mav
-
+from rover_ctl.app.logs import CsvLog, TlogWriter
+from rover_ctl.autopilot.autopilot import LOG_COLUMNS, RELEASE, Autopilot, Readings, StepOutput
+from rover_ctl.autopilot.events import ArmRequest, Event, ItemReached, MissionCurrent, StatusText
 from rover_ctl.config import Config
 from rover_ctl.estimation.estimator import PoseEstimator
-from rover_ctl.autopilot.executor import NAV_COMMANDS, EventKind, MissionExecutor
-from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsafes
+from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad
+from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
 from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
-from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad
-from rover_ctl.vocabulary import ARM_FORCE_MAGIC, RoverMode
-from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
-from rover_ctl.navigation.navigator import Navigator
-from rover_ctl.navigation.planner import Fence, PathFollower, Planner
-from rover_ctl.navigation.proximity import ObstacleMemory
-from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
-from rover_ctl.app.logs import CsvLog, TlogWriter
-from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
+from rover_ctl.vocabulary import ARM_FORCE_MAGIC, RoverMode, Severity, mav
 
 log = logging.getLogger("rover_ctl.app.daemon")
 
@@ -59,21 +57,13 @@ EXIT_UNAVAILABLE = 69
 """The vehicle never answered."""
 EXIT_CONFIG = 78
 
-CSV_COLUMNS = (
-    "t_s", "mode", "armed", "failsafe", "est_east_m", "est_north_m", "est_heading_rad", "est_speed_mps",
-    "est_healthy", "gps_ok", "goal_seq", "goal_east_m", "goal_north_m", "target_east_m", "target_north_m",
-    "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
-    "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
-    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "latency_ms",
-)  # fmt: skip
+CSV_COLUMNS = LOG_COLUMNS
 SENSORS_PRESENT = (mav.MAV_SYS_STATUS_SENSOR_GPS | mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
                    | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)  # fmt: skip
 """SYS_STATUS sensors the daemon reports on the GCS link (through the vehicle)."""
 SENSOR_FAILSAFES = {"GPS lost": mav.MAV_SYS_STATUS_SENSOR_GPS, "fence breach": mav.MAV_SYS_STATUS_GEOFENCE,
                     "vehicle link": mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS}  # fmt: skip
 """Active failsafe -> the SYS_STATUS health bit it clears."""
-RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
-                 6: "range_left_m", 7: "range_front_left_m"}  # fmt: skip
 
 
 class EventLog:
@@ -102,45 +92,30 @@ class Daemon:
         self.settings = config.daemon
         self._stop = False
         self.period_s = 1.0 / self.settings.control_rate_hz
-        # Vehicle-side state.
+        self.autopilot = Autopilot(config, self.rulebase)
         self.link: VehicleLink | None = None
         self.gcs: GcsLink | None = None
         self.vehicle: VehicleStatus | None = None
         self.home: Home | None = None
         self.frame: LocalFrame | None = None
         self.estimator: PoseEstimator | None = None
-        self.wheels = WheelController(config.robot.wheel_radius_m, config.wheel_control)
-        self.navigator = Navigator(self.rulebase, config.navigator, config.robot.max_wheel_rpm, config.robot.wheel_radius_m)
-        self.failsafes = Failsafes(config.failsafe)
-        self.decision: FailsafeDecision | None = None
-        self.clock_s = 0.0
-        """Failsafe clock: vehicle time, carried on by the wall clock while the vehicle is silent."""
         self.last_fix_s: float | None = None
-        self.commanded_speed_mps = 0.0
-        self._silent_neutral_wall_s = 0.0
-        self._marker_wall_s = 0.0
         self.ranges: dict[int, RangeReading] = {}
-        self.proximity = ObstacleMemory(config.proximity, config.robot.footprint_length_m, config.robot.footprint_width_m)
-        self._remembered_s: dict[int, float] = {}  # time of the last reading put into the memory, per orientation
-        self._last_said: str | None = None
         self.battery: Battery | None = None
-        # Autopilot state the GCS sees.
-        self.mode = int(RoverMode.HOLD)
-        self.mission = Mission()
         self.lockstep = False
         self.next_tick_s: float | None = None
-        self.last_step_s: float | None = None
         self._released = False
         self._rx_perf: float | None = None
+        self._marker_wall_s = 0.0
+        self._silent_neutral_wall_s = 0.0
+        self._gcs_heartbeat_wall_s: float | None = None
+        self._gcs_heartbeat_vehicle_s: float | None = None
+        """Vehicle time at which the last ground-station heartbeat was received."""
         self.steps = 0
         self.table = ConfigParams(config)
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
-        # Built once a GPS fix gives the local frame, rebuilt on every new mission.
-        self.planner: Planner | None = None
-        self.follower: PathFollower | None = None
-        self.executor: MissionExecutor | None = None
 
     # ---- lifecycle -----------------------------------------------------------------------------
 
@@ -168,6 +143,7 @@ class Daemon:
         self.vehicle = self.link.wait_vehicle(self.settings.vehicle_wait_s, cancelled=lambda: self._stop)
         if self.vehicle is None:
             return False
+        self.autopilot.on_vehicle(self.vehicle.armed)
         log.info("vehicle sysid %d found (mode %d, armed %s)", self.link.target_system, self.vehicle.custom_mode, self.vehicle.armed)
         self._request_streams()
         result = self.link.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, RoverMode.MANUAL)
@@ -176,6 +152,7 @@ class Daemon:
         store_path = cfg.gcs.mission_store_path
         store = MissionStore(Path(store_path).expanduser()) if store_path else None
         self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store)
+        self._apply(self.autopilot.drain())
         if self.log_dir:
             self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog"))
             self.tlogs[-1].attach(self.gcs.conn)
@@ -245,6 +222,7 @@ class Daemon:
             self._maybe_step(link.vehicle_time_s)
         self._check_silence()
         self.gcs.poll(time.monotonic())
+        self._note_gcs_heartbeat()
         self._send_telemetry()
         if not items:
             fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
@@ -253,7 +231,7 @@ class Daemon:
     def _on_item(self, item: Any) -> None:
         if isinstance(item, WheelDistance):
             self._rx_perf = time.perf_counter()
-            self.wheels.on_wheels(item)
+            self.autopilot.on_wheels(item)
             if self.estimator:
                 self.estimator.on_wheels(item)
         elif isinstance(item, Attitude):
@@ -273,11 +251,12 @@ class Daemon:
                 self.estimator.on_gps(item)
         elif isinstance(item, VehicleStatus):
             self.vehicle = item
+            self.autopilot.on_vehicle(item.armed)
         elif isinstance(item, Battery):
             self.battery = item
-        elif isinstance(item, StatusText):
+        elif isinstance(item, VehicleText):
             log.info("vehicle: %s", item.text)
-            self.events.write(item.time_s, "statustext", text=item.text, severity=item.severity)
+            self.events.write(item.time_s, "statustext", text=item.text, severity=item.severity, source="vehicle")
 
     def _set_home(self, fix: GpsFix) -> None:
         self.home = Home(fix.lat_deg, fix.lon_deg, fix.alt_m)
@@ -285,91 +264,49 @@ class Daemon:
         self.estimator = PoseEstimator(self.frame, self.config.estimator, self.config.robot.track_m)
         self.events.write(fix.time_s, "frame", lat_deg=fix.lat_deg, lon_deg=fix.lon_deg, alt_m=fix.alt_m)
         log.info("home set at %.7f %.7f", fix.lat_deg, fix.lon_deg)
-        self._load_mission_into_core()
-
-    # ---- mission ---------------------------------------------------------------------------------
-
-    def _load_mission_into_core(self) -> None:
-        """(Re)build the planner, path follower and executor for the current mission and home."""
-        if self.frame is None:
-            return  # done again once the first fix gives a frame
-        cfg = self.config
-
-        def to_enu(lat_deg: float, lon_deg: float) -> tuple[float, float]:
-            return self.frame.to_enu(lat_deg, lon_deg)
-
-        fence = Fence.from_items(self.mission.fence, to_enu) if self.mission.fence else Fence()
-        self.planner = Planner(cfg.planner, cfg.robot, fence=fence)
-        self.follower = PathFollower(self.planner, cfg.planner)
-        self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, cfg.robot.max_speed_mps)
-        waypoints = [to_enu(i.x, i.y) for i in self.mission.items if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y)]
-        self.events.write(self._now(), "mission", waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items),
-                          items=len(self.mission.items), waypoints_en=[list(map(float, w)) for w in waypoints])  # fmt: skip
-        self._goal_seen: tuple[float, float] | None = None
+        self.autopilot.set_home(self.home, self.frame)
+        self._apply(self.autopilot.drain())
 
     def _now(self) -> float:
         return self.link.vehicle_time_s if self.link else 0.0
 
-    # ---- AutopilotHandlers (the GCS link calls these) ---------------------------------------------
+    def _note_gcs_heartbeat(self) -> None:
+        """Stamp a newly received ground-station heartbeat with the vehicle time."""
+        seen = self.gcs.last_gcs_heartbeat_s
+        if seen is not None and seen != self._gcs_heartbeat_wall_s:
+            self._gcs_heartbeat_wall_s = seen
+            self._gcs_heartbeat_vehicle_s = self._now()
+
+    # ---- AutopilotHandlers (the GCS link calls these): the autopilot decides, its events go out now
 
     def state(self) -> VehicleState:
-        armed = bool(self.vehicle and self.vehicle.armed)
-        status = mav.MAV_STATE_ACTIVE if armed else mav.MAV_STATE_STANDBY
-        if self.decision is not None and self.decision.action >= Action.HOLD:
-            status = mav.MAV_STATE_CRITICAL
-        return VehicleState(armed, self.mode, status, self.home)
+        s = self.autopilot.state()
+        return VehicleState(s.armed, int(s.mode), s.system_status, s.home, int(s.mission_state))
 
     def arm(self, arm: bool, force: bool) -> int:
-        if arm and self.home is None and not force:
-            self._say("PreArm: no GPS fix yet", mav.MAV_SEVERITY_CRITICAL)
-            return mav.MAV_RESULT_DENIED
-        if not arm:
-            self.wheels.neutral()
-        params = (1.0 if arm else 0.0, float(ARM_FORCE_MAGIC) if force else 0.0)
-        self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params, on_result=self._on_arm_result)
-        return mav.MAV_RESULT_ACCEPTED
-
-    def _on_arm_result(self, result) -> None:
-        if not result.accepted:
-            self._say(f"Vehicle refused arming/disarming (result {result.result})", mav.MAV_SEVERITY_WARNING)
+        return self._request(self.autopilot.arm(arm, force))
 
     def set_mode(self, custom_mode: int) -> int:
-        if custom_mode not in (RoverMode.MANUAL, RoverMode.HOLD, RoverMode.AUTO, RoverMode.RTL):
-            return mav.MAV_RESULT_DENIED
-        if custom_mode in (RoverMode.AUTO, RoverMode.RTL) and self.executor is None:
-            self._say("Mode change refused: no GPS home yet", mav.MAV_SEVERITY_WARNING)
-            return mav.MAV_RESULT_FAILED
-        if custom_mode == RoverMode.AUTO and not self.mission.items:
-            self._say("Mode change refused: no mission", mav.MAV_SEVERITY_WARNING)
-            return mav.MAV_RESULT_FAILED
-        self._enter_mode(int(custom_mode))
-        return mav.MAV_RESULT_ACCEPTED
+        return self._request(self.autopilot.set_mode(custom_mode))
 
     def mission_start(self) -> int:
-        if self.executor is None or not self.mission.items:
-            return mav.MAV_RESULT_FAILED
-        self._report(self.executor.restart())
-        self._enter_mode(int(RoverMode.AUTO), resume=False)
-        return mav.MAV_RESULT_ACCEPTED
+        return self._request(self.autopilot.mission_start())
 
     def return_to_launch(self) -> int:
-        return self.set_mode(int(RoverMode.RTL))
+        return self._request(self.autopilot.return_to_launch())
 
     def set_current(self, seq: int) -> bool:
-        if self.executor is None:
-            return False
-        try:
-            self._report(self.executor.set_current(seq))
-        except ValueError as exc:
-            self._say(str(exc), mav.MAV_SEVERITY_WARNING)
-            return False
-        return True
+        ok = self.autopilot.set_current(seq)
+        self._apply(self.autopilot.drain())
+        return ok
 
     def mission_changed(self, mission: Mission, mission_type: int) -> None:
-        self.mission = mission
-        if self.mode in (RoverMode.AUTO, RoverMode.RTL):
-            self._enter_mode(int(RoverMode.HOLD))
-        self._load_mission_into_core()
+        self.autopilot.mission_changed(mission, mission_type)
+        if self.gcs is not None:  # during GcsLink's construction the events wait for open()
+            self._apply(self.autopilot.drain())
+
+    def guided_target(self, lat_deg: float, lon_deg: float, change_mode: bool) -> int:
+        return self._request(self.autopilot.guided_target(lat_deg, lon_deg, change_mode))
 
     def params(self) -> dict[str, float]:
         return self.table.params()
@@ -377,46 +314,46 @@ class Daemon:
     def set_param(self, name: str, value: float) -> bool:
         return self.table.set_param(name, value)
 
-    # ---- modes and events ------------------------------------------------------------------------
+    def _request(self, reply) -> int:
+        self._apply(self.autopilot.drain())
+        return reply.result
 
-    def _enter_mode(self, mode: int, resume: bool = True) -> None:
-        previous, self.mode = self.mode, mode
-        now = self._now()
-        if mode == RoverMode.AUTO and resume:
-            self._report(self.executor.start())
-        elif mode == RoverMode.RTL:
-            self._report(self.executor.rtl())
-        elif self.executor is not None and mode in (RoverMode.HOLD, RoverMode.MANUAL):
-            self.executor.stop()
-        if self.follower is not None:
-            self.follower.reset()
-        self.wheels.reset()
-        self._released = False
-        if previous != mode:
-            log.info("mode %s -> %s", RoverMode(previous).name, RoverMode(mode).name)
-            self.events.write(now, "mode", mode=mode, name=RoverMode(mode).name)
+    # ---- the autopilot's outputs ---------------------------------------------------------------
 
-    def _report(self, events: list) -> None:
-        """Executor events -> GCS messages and the event log."""
+    def _apply(self, events: list[Event] | tuple[Event, ...]) -> None:
+        """Events -> GCS messages, vehicle commands and the event log, in order."""
         now = self._now()
         for event in events:
-            if event.kind is EventKind.ITEM_REACHED:
+            kind, fields = event.log_record()
+            self.events.write(now, kind, **fields)
+            if isinstance(event, StatusText):
+                log.log(logging.WARNING if event.severity <= Severity.WARNING else logging.INFO, "%s", event.text)
+                self.gcs.send_statustext(event.text, int(event.severity))
+            elif isinstance(event, MissionCurrent):
+                self.gcs.send_mission_current(event.seq, int(event.state))
+            elif isinstance(event, ItemReached):
                 self.gcs.send_mission_item_reached(event.seq)
-                self.events.write(now, "reached", seq=event.seq)
-            elif event.kind is EventKind.CURRENT:
-                self.gcs.send_mission_current(event.seq)
-                self.events.write(now, "current", seq=event.seq)
-            elif event.kind is EventKind.COMPLETE:
-                self.events.write(now, "complete", seq=event.seq)
-                log.info("mission complete at t=%.2f s", now)
-            elif event.kind is EventKind.STATUSTEXT:
-                self._say(event.text, int(event.severity))
+            elif isinstance(event, ArmRequest):
+                params = (1.0 if event.arm else 0.0, float(ARM_FORCE_MAGIC) if event.force else 0.0)
+                self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params, on_result=self._on_arm_result)
+            elif kind in ("mode", "complete"):
+                log.info("%s %s at t=%.2f s", kind, fields, now)
 
-    def _say(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
-        log.log(logging.WARNING if severity <= mav.MAV_SEVERITY_WARNING else logging.INFO, "%s", text)
-        self.events.write(self._now(), "statustext", text=text, severity=severity)
-        if self.gcs is not None:
-            self.gcs.send_statustext(text, severity)
+    def _on_arm_result(self, result) -> None:
+        if not result.accepted:
+            text = f"Vehicle refused arming/disarming (result {result.result})"
+            log.warning("%s", text)
+            self.events.write(self._now(), "statustext", text=text, severity=int(Severity.WARNING))
+            self.gcs.send_statustext(text, mav.MAV_SEVERITY_WARNING)
+
+    def _send_command(self, out: StepOutput) -> None:
+        if out.command is RELEASE:
+            if not self._released:
+                self.link.release_override()
+                self._released = True
+            return
+        self._released = False
+        self.link.send_override(out.command.steering_us, out.command.throttle_us)
 
     # ---- the control step ------------------------------------------------------------------------
 
@@ -426,162 +363,55 @@ class Daemon:
             self.next_tick_s = t_s
         if t_s + 1e-9 < self.next_tick_s:
             return
-        dt_s = self.period_s if self.last_step_s is None else max(t_s - self.last_step_s, 1e-3)
-        self.last_step_s = t_s
         self.next_tick_s += self.period_s
         if self.next_tick_s <= t_s:  # fell behind (a gap in the data): do not replay missed ticks
             self.next_tick_s = t_s + self.period_s
-        self.control_step(t_s, dt_s)
-
-    def control_step(self, t_s: float, dt_s: float) -> None:
-        row: dict[str, Any] = dict.fromkeys(CSV_COLUMNS, "")
-        pose = self.estimator.pose() if self.estimator and self.estimator.initialised else None
         last = self.link.last_rx_vehicle_s
-        decision = self._failsafe(t_s, pose, vehicle_age_s=0.0 if last is None else max(0.0, t_s - last))
-        row.update(t_s=t_s, mode=self.mode, armed=int(self._armed()), failsafe="+".join(decision.reasons))
-        if pose is not None:
-            row.update(est_east_m=pose.east_m, est_north_m=pose.north_m, est_heading_rad=pose.heading_rad,
-                       est_speed_mps=pose.speed_mps, est_healthy=int(pose.healthy), gps_ok=int(pose.gps_ok))  # fmt: skip
-        for orientation, column in RANGE_COLUMNS.items():
-            if orientation in self.ranges:
-                row[column] = self.ranges[orientation].range_m
-        command = self._decide(t_s, dt_s, pose, decision, row)
-        if command is None:
-            if not self._released:
-                self.link.release_override()
-                self._released = True
-        else:
-            self.link.send_override(command.steering_us, command.throttle_us)
-            row.update(steering_us=command.steering_us, throttle_us=command.throttle_us)
+        self.control_step(t_s, vehicle_age_s=0.0 if last is None else max(0.0, t_s - last))
+
+    def control_step(self, t_s: float, vehicle_age_s: float) -> None:
+        out = self.autopilot.step(t_s, self._pose(), self._readings(t_s, vehicle_age_s))
+        self._send_command(out)
+        self._apply(out.events)
+        row = out.log_row
         if self._rx_perf is not None:
             row["latency_ms"] = (time.perf_counter() - self._rx_perf) * 1e3
-        row.update(left_meas_rpm=self.wheels.meter.left_rpm, right_meas_rpm=self.wheels.meter.right_rpm)
         self.steps += 1
         if self.csv:
             self.csv.write(row)
             if self.steps % 50 == 0:
                 self.csv.flush()
 
-    def _armed(self) -> bool:
-        return bool(self.vehicle and self.vehicle.armed)
+    def _pose(self):
+        return self.estimator.pose() if self.estimator and self.estimator.initialised else None
 
-    def _driving(self) -> bool:
-        return self._armed() and self.mode in (RoverMode.AUTO, RoverMode.RTL)
-
-    def _failsafe(self, t_s: float, pose, vehicle_age_s: float) -> FailsafeDecision:
-        """Measure the ages, ask ``rover_ctl.autopilot.failsafe``, report its events, apply a mode change."""
-        self.clock_s = max(self.clock_s, t_s)
-        now = self.clock_s
-        gcs_seen = self.gcs.last_gcs_heartbeat_s if self.gcs else None
-        position = (pose.east_m, pose.north_m) if pose is not None else None
-        inputs = FailsafeInputs(
+    def _readings(self, t_s: float, vehicle_age_s: float) -> Readings:
+        gcs_s = self._gcs_heartbeat_vehicle_s
+        return Readings(
+            ranges=dict(self.ranges),
             vehicle_age_s=vehicle_age_s,
-            gcs_age_s=math.inf if gcs_seen is None else time.monotonic() - gcs_seen,
+            gcs_age_s=math.inf if gcs_s is None else max(0.0, t_s - gcs_s),
             gps_age_s=math.inf if self.last_fix_s is None else max(0.0, t_s - self.last_fix_s),
-            range_ages_s={o: max(0.0, t_s - r.time_s) for o, r in self.ranges.items()},
-            estimator_healthy=pose is not None and pose.healthy,
-            inside_fence=position is None or self.planner is None or self.planner.is_inside_fence(position),
-            driving=self._driving(),
-            commanded_speed_mps=self.commanded_speed_mps,
-            position_en=position,
         )
-        decision = self.failsafes.update(now, inputs)
-        previous = self.decision.reasons if self.decision else ()
-        self.decision = decision
-        for event in decision.events:
-            self._say(event.text, int(event.severity))
-        if decision.reasons != previous:
-            self.events.write(t_s, "failsafe", reasons=list(decision.reasons), action=decision.action.name)
-        if decision.action == Action.RTL and self.mode == RoverMode.AUTO and self.executor is not None:
-            self._enter_mode(int(RoverMode.RTL))
-        if decision.replan and self.follower is not None and pose is not None:
-            # Backed off after being stuck: mark the spot ahead as blocked and plan around it; each
-            # further try in the same episode blocks a wider circle (the first detour was too tight).
-            radius_m = self.config.planner.blocked_radius_m * max(1, decision.stuck_tries)
-            ahead_m = radius_m + self.config.robot.footprint_length_m
-            self.follower.block(t_s, (pose.east_m + ahead_m * math.cos(pose.heading_rad),
-                                      pose.north_m + ahead_m * math.sin(pose.heading_rad)), radius_m)  # fmt: skip
-        return decision
 
     def _check_silence(self) -> None:
         """Nothing at all from the vehicle (not even lockstep markers, which would drive the
-        control step and its failsafe in vehicle time): run the failsafe on the wall clock and
-        send neutral."""
+        control step and its failsafe in vehicle time): step the autopilot on the wall clock, at
+        most once a control period, so that its vehicle-link failsafe sends neutral."""
         link = self.link
         if link.last_rx_wall_s is None:
             return
         age_s = time.monotonic() - max(link.last_rx_wall_s, self._marker_wall_s)
-        if age_s <= self.config.failsafe.vehicle_timeout_s:
+        if age_s <= self.config.failsafe.vehicle_timeout_s or time.monotonic() < self._silent_neutral_wall_s:
             return
-        pose = self.estimator.pose() if self.estimator and self.estimator.initialised else None
-        self.commanded_speed_mps = 0.0  # nothing is being driven: not a stuck rover
-        decision = self._failsafe(link.vehicle_time_s + age_s, pose, vehicle_age_s=age_s)
-        if decision.action == Action.NEUTRAL and time.monotonic() >= self._silent_neutral_wall_s:
-            self._silent_neutral_wall_s = time.monotonic() + self.period_s
-            neutral = self.wheels.neutral()
-            link.send_override(neutral.steering_us, neutral.throttle_us)
+        self._silent_neutral_wall_s = time.monotonic() + self.period_s
+        t_s = link.vehicle_time_s + age_s
+        out = self.autopilot.step(t_s, self._pose(), self._readings(t_s, age_s))
+        self._apply(out.events)
+        if out.command is not RELEASE:
+            self._send_command(out)
         if age_s > self.settings.stream_rerequest_s and time.monotonic() - self._streams_requested_wall_s > self.settings.stream_rerequest_s:
             self._request_streams()  # the vehicle may have rebooted and forgotten our rates
-
-    def _decide(self, t_s: float, dt_s: float, pose, decision: FailsafeDecision, row: dict[str, Any]) -> WheelCommand | None:
-        """The wheel command for this step; None = hand the channels back (MANUAL)."""
-        self.commanded_speed_mps = 0.0
-        if decision.action == Action.NEUTRAL:
-            return self.wheels.neutral()
-        if self.mode == RoverMode.MANUAL:
-            return None
-        if not self._armed() or self.executor is None or pose is None:
-            return self.wheels.neutral()
-        if self.mode == RoverMode.HOLD or decision.action == Action.HOLD:
-            return self._hold(t_s, dt_s, pose)
-        out = self.executor.update(t_s, (pose.east_m, pose.north_m))
-        self._report(out.events)
-        row.update(goal_seq=out.current_seq, speed_limit_mps=out.speed_limit_mps)
-        if self.executor.complete and self.mode == RoverMode.AUTO:
-            self._enter_mode(int(RoverMode.HOLD))
-            return self._hold(t_s, dt_s, pose)
-        if out.hold or out.target_en is None:
-            return self._hold(t_s, dt_s, pose)
-        row.update(goal_east_m=out.target_en[0], goal_north_m=out.target_en[1])
-        if decision.action == Action.BACK_OFF:
-            rpm = -self._speed_to_rpm(self.config.failsafe.back_off_speed_mps)
-            row.update(left_set_rpm=rpm, right_set_rpm=rpm)
-            return self.wheels.step(t_s, dt_s, rpm, rpm)
-        guidance = self.follower.update(t_s, (pose.east_m, pose.north_m), out.target_en)
-        if guidance.replanned and guidance.path is not None and guidance.path.ok:
-            self.events.write(t_s, "plan", goal_seq=out.current_seq, length_m=round(guidance.path.length_m, 3),
-                              path_en=[[round(e, 3), round(n, 3)] for e, n in guidance.path.points])  # fmt: skip
-        if guidance.target_en is None:
-            self._say_once(f"No path: {guidance.error}")
-            return self._hold(t_s, dt_s, pose)
-        row.update(target_east_m=guidance.target_en[0], target_north_m=guidance.target_en[1], cross_track_m=guidance.cross_track_m)
-        for orientation, reading in self.ranges.items():
-            if reading.time_s > self._remembered_s.get(orientation, -math.inf):
-                self._remembered_s[orientation] = reading.time_s
-                self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
-        ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self.ranges.items()})
-        for orientation in decision.blocked_orientations:
-            ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
-        nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
-                                  ranges, out.speed_limit_mps, guidance.remaining_m)  # fmt: skip
-        self.commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
-        row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
-                   target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
-        return self.wheels.step(t_s, dt_s, nav.left_rpm, nav.right_rpm)
-
-    def _hold(self, t_s: float, dt_s: float, pose) -> WheelCommand:
-        """Stop: brake actively (zero wheel-speed setpoints) while moving, then neutral."""
-        if pose is not None and abs(pose.speed_mps) > self.settings.hold_speed_mps:
-            return self.wheels.step(t_s, dt_s, 0.0, 0.0)
-        return self.wheels.neutral()
-
-    def _speed_to_rpm(self, speed_mps: float) -> float:
-        return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0
-
-    def _say_once(self, text: str) -> None:
-        if text != self._last_said:
-            self._last_said = text
-            self._say(text, mav.MAV_SEVERITY_WARNING)
 
     # ---- telemetry to the GCS ------------------------------------------------------------------
 
@@ -590,8 +420,8 @@ class Daemon:
         if self.link.last_gps_msg is not None:
             self.gcs.send_gps_raw_int(now, self.link.last_gps_msg)
         if self.battery is not None:
-            present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.mission.fence else 0)
-            reasons = self.decision.reasons if self.decision else ()
+            present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.autopilot.mission.fence else 0)
+            reasons = self.autopilot.state().failsafes
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)
             self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed)
         if self.estimator is None or not self.estimator.initialised or not self.gcs.pose_due(now):

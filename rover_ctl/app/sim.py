@@ -4,8 +4,14 @@ Three processes, as in the field: ``rover-sitl`` (the rover), ``rover-ctl run`` 
 this one, which plays the ground station. ``SimRun`` starts the two children (``sys.executable
 -m ...``), waits for the emulator's ``ready`` line, uploads the mission over the GCS link with the
 mission client, arms, starts AUTO and watches the GCS link until the mission completes or the
-sim-time budget runs out. It also listens on a second emulator endpoint (sysid 254, never allowed
-to drive) to see collisions and to set the emulator's SIM_* fault parameters (tests use it).
+sim-time budget runs out. Progress comes from message fields only: MISSION_CURRENT (``seq``,
+``total``, ``mission_state``: COMPLETE ends the run), MISSION_ITEM_REACHED, HEARTBEAT, the
+position; collisions come from the emulator's truth log (``collision`` records, read as it grows).
+A second emulator endpoint (sysid 254, never allowed to drive) sets the emulator's SIM_* fault
+parameters (tests use it).
+
+Our GCS heartbeat goes out every ``GCS_HEARTBEAT_PERIOD_S`` of wall time and of sim time, whichever
+comes first: the daemon ages it in vehicle time, which in lockstep runs faster than the wall clock.
 
 Ports are chosen free on 127.0.0.1: the vehicle link is TCP (the daemon connects to the
 emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: pymavlink serves
@@ -35,11 +41,12 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
+from rover_ctl.autopilot.executor import NAV_COMMANDS  # noqa: E402
 from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
 from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
-from rover_ctl.vocabulary import RoverMode  # noqa: E402
+from rover_ctl.vocabulary import MissionState, RoverMode  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
 """The ``rover-ctl`` command of this interpreter."""
@@ -63,6 +70,32 @@ def _copy_lines(stream: Any, path: Path) -> None:
         for line in stream:
             handle.write(line)
             handle.flush()
+
+
+class TruthTail:
+    """The records appended to the emulator's truth log since the last ``read`` (whole lines only)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._offset = 0
+        self._partial = b""
+
+    def read(self) -> list[dict]:
+        try:
+            with open(self.path, "rb") as handle:
+                handle.seek(self._offset)
+                data = handle.read()
+        except FileNotFoundError:
+            return []
+        self._offset += len(data)
+        *lines, self._partial = (self._partial + data).split(b"\n")
+        records = []
+        for line in lines:
+            try:
+                records.append(json.loads(line))
+            except ValueError:
+                continue  # a line cut by a crash
+        return records
 
 
 class SimError(RuntimeError):
@@ -101,6 +134,11 @@ class Progress:
     wall_started: float = field(default_factory=time.monotonic)
     current_seq: int = 0
     waypoints_total: int = 0
+    """Navigation items in the mission file."""
+    items_total: int = 0
+    """MISSION_CURRENT.total: the daemon's mission items (home excluded)."""
+    mission_state: MissionState = MissionState.UNKNOWN
+    """MISSION_CURRENT.mission_state."""
     reached: set[int] = field(default_factory=set)
     distance_left_m: float = math.nan
     collisions: int = 0
@@ -108,13 +146,16 @@ class Progress:
     armed: bool = False
     system_status: int = 0
     """MAV_STATE of the daemon's heartbeat (CRITICAL while a failsafe holds)."""
-    complete: bool = False
     last_text: str = ""
     texts: list[str] = field(default_factory=list)
     """Every STATUSTEXT from the daemon, in order."""
     position_en: tuple[float, float] | None = None
     gcs_url: str = ""
     """Where another ground station can attach to the daemon."""
+
+    @property
+    def complete(self) -> bool:
+        return self.mission_state == MissionState.COMPLETE
 
     @property
     def elapsed_sim_s(self) -> float:
@@ -140,7 +181,7 @@ class SimRun:
         self.home = self.mission.home
         self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home.alt_m) if self.home else None
         self.targets = {seq: (item.x, item.y) for seq, item in enumerate(self.mission.items, 1) if item.is_global and (item.x or item.y)}
-        self.progress = Progress(waypoints_total=sum(i.command in (16, 19, 20) for i in self.mission.items))
+        self.progress = Progress(waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items))
         self.world_path: Path | None = options.world
         self.sitl: subprocess.Popen | None = None
         self.daemon: subprocess.Popen | None = None
@@ -159,6 +200,8 @@ class SimRun:
         self.send_heartbeats = True
         """Our GCS heartbeat at 1 Hz, as a ground station sends it (tests pause it for the GCS failsafe)."""
         self._next_heartbeat_wall = 0.0
+        self._next_heartbeat_sim = 0.0
+        self._truth = TruthTail(self.out / "truth.jsonl")
 
     # ---- processes -------------------------------------------------------------------------
 
@@ -253,6 +296,7 @@ class SimRun:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+        self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())  # flushed at exit
         for conn in (self.gcs, self.watcher):
             if conn is not None:
                 conn.close()
@@ -334,20 +378,26 @@ class SimRun:
 
     def poll(self, wait_s: float = 0.05) -> None:
         """Read what both connections have (waiting up to ``wait_s`` for the GCS link)."""
-        if self.send_heartbeats and time.monotonic() >= self._next_heartbeat_wall:
-            self._next_heartbeat_wall = time.monotonic() + GCS_HEARTBEAT_PERIOD_S
-            self.gcs.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        self._heartbeat()
         msg = self.gcs.conn.recv_match(blocking=True, timeout=wait_s)
         while msg is not None:
             self._observe(msg)
+            self._heartbeat()
             msg = self.gcs.conn.recv_msg()
         while (msg := self.watcher.recv_msg()) is not None:
-            kind = msg.get_type()
-            if kind == "STATUSTEXT" and "collision" in msg.text.lower():
-                self.progress.collisions += 1
-            elif kind == "PARAM_VALUE":
+            if msg.get_type() == "PARAM_VALUE":
                 self._param_ack[msg.param_id] = float(msg.param_value)
+        self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())
         self._check_children()
+
+    def _heartbeat(self) -> None:
+        """Our GCS heartbeat, due every period of wall time or of sim time."""
+        p = self.progress
+        due = time.monotonic() >= self._next_heartbeat_wall or p.sim_time_s >= self._next_heartbeat_sim
+        if self.send_heartbeats and due:
+            self._next_heartbeat_wall = time.monotonic() + GCS_HEARTBEAT_PERIOD_S
+            self._next_heartbeat_sim = p.sim_time_s + GCS_HEARTBEAT_PERIOD_S
+            self.gcs.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
     def _observe(self, msg: Any) -> None:
         p = self.progress
@@ -360,22 +410,27 @@ class SimRun:
             p.armed = bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
             p.system_status = msg.system_status
         elif kind == "GLOBAL_POSITION_INT":
-            p.sim_time_s = msg.time_boot_ms / 1000.0
+            p.sim_time_s = max(p.sim_time_s, msg.time_boot_ms / 1000.0)
             if self.frame is not None:
                 p.position_en = self.frame.to_enu(msg.lat / 1e7, msg.lon / 1e7)
                 target = self.targets.get(p.current_seq)
                 if target is not None:
                     te, tn = self.frame.to_enu(*target)
                     p.distance_left_m = math.dist(p.position_en, (te, tn))
+        elif kind == "ATTITUDE":
+            p.sim_time_s = max(p.sim_time_s, msg.time_boot_ms / 1000.0)
         elif kind == "MISSION_CURRENT":
             p.current_seq = msg.seq
+            p.items_total = msg.total
+            try:
+                p.mission_state = MissionState(msg.mission_state)
+            except ValueError:
+                p.mission_state = MissionState.UNKNOWN
         elif kind == "MISSION_ITEM_REACHED":
             p.reached.add(msg.seq)
         elif kind == "STATUSTEXT":
             p.last_text = msg.text
             p.texts.append(msg.text)
-            if msg.text.startswith("Mission complete"):
-                p.complete = True
 
     def wait_for(self, predicate: Callable[[Progress], bool], sim_timeout_s: float | None = None,
                  wall_timeout_s: float | None = None, on_tick: Callable[[Progress], None] | None = None) -> bool:  # fmt: skip

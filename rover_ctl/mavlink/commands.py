@@ -1,13 +1,16 @@
 """The command microservice on the GCS link: COMMAND_LONG / COMMAND_INT and SET_MODE.
 
 Each command is answered with COMMAND_ACK to its sender: arm/disarm, DO_SET_MODE, MISSION_START,
-NAV_RETURN_TO_LAUNCH, DO_SET_MISSION_CURRENT, REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES
-(AUTOPILOT_VERSION, HOME_POSITION), GET_HOME_POSITION, SET_MESSAGE_INTERVAL; anything else
-MAV_RESULT_UNSUPPORTED. What a command does is the autopilot handlers' decision.
+NAV_RETURN_TO_LAUNCH, DO_SET_MISSION_CURRENT, DO_REPOSITION (a GUIDED destination: COMMAND_INT x/y
+in degE7, COMMAND_LONG param5/6 in degrees; param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE switches
+to GUIDED), REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES (AUTOPILOT_VERSION, HOME_POSITION),
+GET_HOME_POSITION, SET_MESSAGE_INTERVAL; anything else MAV_RESULT_UNSUPPORTED. What a command does
+is the autopilot handlers' decision.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 from rover_ctl import __version__
@@ -25,6 +28,11 @@ CAPABILITIES = (
 )
 """What AUTOPILOT_VERSION claims: only what this link implements."""
 FIRMWARE_VERSION_TYPE_DEV = 0
+GLOBAL_INT_FRAMES = frozenset({
+    mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_INT,
+    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+})  # fmt: skip
+"""COMMAND_INT frames whose x/y are latitude/longitude in degE7 (the rover ignores altitude)."""
 
 
 def software_version() -> int:
@@ -73,6 +81,8 @@ class CommandService:
             result = h.mission_start()
         elif command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             result = h.return_to_launch()
+        elif command == mav.MAV_CMD_DO_REPOSITION:
+            result = self._reposition(msg)
         elif command == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
             replies = self.mission.request_current(int(msg.param1))
             ok = replies[0].get_type() == "MISSION_CURRENT"
@@ -90,6 +100,16 @@ class CommandService:
         self.conn.mav.send(mav.MAVLink_command_ack_message(command, result, 0, 0, sender[0], sender[1]))
         if followup is not None:
             self.conn.mav.send(followup)
+
+    def _reposition(self, msg) -> int:
+        if msg.get_type() == "COMMAND_INT":
+            if msg.frame not in GLOBAL_INT_FRAMES:
+                return mav.MAV_RESULT_DENIED
+            lat_deg, lon_deg = msg.x / 1e7, msg.y / 1e7
+        else:
+            lat_deg, lon_deg = msg.param5, msg.param6
+        flags = int(msg.param2) if math.isfinite(msg.param2) else 0
+        return self.handlers.guided_target(lat_deg, lon_deg, bool(flags & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE))
 
     def _requested(self, msg_id: int):
         if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:

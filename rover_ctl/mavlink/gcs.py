@@ -17,15 +17,26 @@ station gets, with the tested clients):
 
 The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT is an int):
 
-    state() -> VehicleState                 armed, custom_mode, system_status, home
+    state() -> VehicleState                 armed, custom_mode, system_status, home, mission_state
     arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: ARM_FORCE_MAGIC)
     set_mode(custom_mode: int) -> int       DO_SET_MODE / SET_MODE (RoverMode numbers)
     mission_start() -> int                  MAV_CMD_MISSION_START
     return_to_launch() -> int               MAV_CMD_NAV_RETURN_TO_LAUNCH
     set_current(seq: int) -> bool           MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT (wire seq)
     mission_changed(mission, mission_type)  after an accepted upload or clear (255 = all types)
+    guided_target(lat, lon, change_mode) -> int   a GUIDED destination, from any of the forms
+                                            ground stations send (below)
     params() -> dict[str, float]            the parameter table, in a stable order
     set_param(name: str, value: float) -> bool
+
+A refusal's reason is the handler's to say (a STATUSTEXT before the ACK, as ArduPilot does).
+
+GUIDED destinations arrive as MAV_CMD_DO_REPOSITION (COMMAND_INT, as QGroundControl's "go to
+location" and MAVProxy's ``guided LAT LON ALT`` send it, or COMMAND_LONG; its CHANGE_MODE flag
+switches to GUIDED), as SET_POSITION_TARGET_GLOBAL_INT (only in GUIDED, no answer), or as a
+MISSION_ITEM(_INT) NAV_WAYPOINT with ``current`` = 2 (ArduPilot's guided-WP convention, sent by
+MAVProxy with ``guided_use_reposition`` off and by QGroundControl when DO_REPOSITION is
+unsupported), answered with MISSION_ACK.
 
 ``DefaultHandlers`` implements it in memory (tests, and a base for the daemon).
 """
@@ -41,7 +52,7 @@ from pymavlink import mavutil
 from rover_ctl.config import Config, GcsParams
 from rover_ctl.mavlink import commands, params
 from rover_ctl.mavlink.commands import CommandService
-from rover_ctl.mavlink.mission import MissionService
+from rover_ctl.mavlink.mission import MissionService, item_from_message
 from rover_ctl.mavlink.params import ConfigParams, ParamService
 from rover_ctl.mavlink.telemetry import Telemetry
 from rover_ctl.mission.model import Home, Mission
@@ -50,6 +61,12 @@ from rover_ctl.vocabulary import RoverMode, mav
 
 log = logging.getLogger(__name__)
 
+GUIDED_ITEMS = ("MISSION_ITEM_INT", "MISSION_ITEM")
+GUIDED_ITEM_CURRENT = 2
+"""MISSION_ITEM.current = 2 marks a GUIDED destination, not an upload (ArduPilot's convention)."""
+POSITION_IGNORED = mav.POSITION_TARGET_TYPEMASK_X_IGNORE | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE
+"""SET_POSITION_TARGET_GLOBAL_INT without a position (velocity or yaw only): not a destination."""
+
 
 @dataclass(frozen=True)
 class VehicleState:
@@ -57,6 +74,8 @@ class VehicleState:
     custom_mode: int = RoverMode.HOLD
     system_status: int = mav.MAV_STATE_STANDBY
     home: Home | None = None
+    mission_state: int = mav.MISSION_STATE_UNKNOWN
+    """MISSION_CURRENT.mission_state (MISSION_STATE_*)."""
 
 
 class AutopilotHandlers(Protocol):
@@ -67,6 +86,7 @@ class AutopilotHandlers(Protocol):
     def return_to_launch(self) -> int: ...
     def set_current(self, seq: int) -> bool: ...
     def mission_changed(self, mission: Mission, mission_type: int) -> None: ...
+    def guided_target(self, lat_deg: float, lon_deg: float, change_mode: bool) -> int: ...
     def params(self) -> dict[str, float]: ...
     def set_param(self, name: str, value: float) -> bool: ...
 
@@ -80,11 +100,15 @@ class DefaultHandlers:
         self.home = home
         self.mission = Mission()
         self.current_seq = 0
+        self.guided: tuple[float, float] | None = None
         self.table = ConfigParams(config or Config())
 
     def state(self) -> VehicleState:
         status = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
-        return VehicleState(self.armed, self.custom_mode, status, self.home)
+        mission_state = mav.MISSION_STATE_NOT_STARTED if self.mission.items else mav.MISSION_STATE_NO_MISSION
+        if self.mission.items and self.custom_mode == RoverMode.AUTO:
+            mission_state = mav.MISSION_STATE_ACTIVE
+        return VehicleState(self.armed, self.custom_mode, status, self.home, mission_state)
 
     def arm(self, arm: bool, force: bool) -> int:
         self.armed = arm
@@ -112,6 +136,13 @@ class DefaultHandlers:
 
     def mission_changed(self, mission: Mission, mission_type: int) -> None:
         self.mission = mission
+
+    def guided_target(self, lat_deg: float, lon_deg: float, change_mode: bool) -> int:
+        if self.custom_mode != RoverMode.GUIDED and not change_mode:
+            return mav.MAV_RESULT_DENIED
+        self.custom_mode = int(RoverMode.GUIDED)
+        self.guided = (lat_deg, lon_deg)
+        return mav.MAV_RESULT_ACCEPTED
 
     def params(self) -> dict[str, float]:
         return self.table.params()
@@ -164,6 +195,7 @@ class GcsLink:
         """Read and dispatch every pending message, then send what is due. Never blocks."""
         state = self.handlers.state()
         self.service.vehicle_home = state.home
+        self.service.mission_state = state.mission_state
         while (msg := self.conn.recv_msg()) is not None:
             if msg.get_type() != "BAD_DATA":
                 self._dispatch(msg, now_s)
@@ -184,6 +216,13 @@ class GcsLink:
                     self._next_heartbeat_s = None
                 self.last_gcs_heartbeat_s = now_s
             return
+        if kind in GUIDED_ITEMS and getattr(msg, "current", 0) == GUIDED_ITEM_CURRENT:
+            self._guided_item(msg)
+            return
+        if kind == "SET_POSITION_TARGET_GLOBAL_INT":
+            if msg.target_system in (0, self.params.system_id) and not msg.type_mask & POSITION_IGNORED:
+                self.handlers.guided_target(msg.lat_int / 1e7, msg.lon_int / 1e7, False)
+            return
         if kind in MissionService.HANDLED:
             before = self.service.mission
             replies = self.service.handle(msg, now_s)
@@ -199,6 +238,17 @@ class GcsLink:
             self.telemetry.on_request_data_stream(msg)
         elif kind in params.HANDLED:
             self.param_service.handle(msg)
+
+    def _guided_item(self, msg) -> None:
+        """A MISSION_ITEM(_INT) with current = 2: a GUIDED destination, answered by MISSION_ACK."""
+        if msg.target_system not in (0, self.params.system_id):
+            return
+        item = item_from_message(msg)
+        result = mav.MAV_MISSION_UNSUPPORTED
+        if item.command == mav.MAV_CMD_NAV_WAYPOINT and item.is_global:
+            accepted = self.handlers.guided_target(item.x, item.y, False) == mav.MAV_RESULT_ACCEPTED
+            result = mav.MAV_MISSION_ACCEPTED if accepted else mav.MAV_MISSION_ERROR
+        self.conn.mav.send(mav.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(), result, msg.mission_type))
 
     def _commit(self, mission: Mission, mission_type: int) -> None:
         if self.store is not None:
@@ -250,9 +300,10 @@ class GcsLink:
         self.telemetry.send_statustext(text, severity)
 
     def send_mission_current(self, seq: int, mission_state: int = mav.MISSION_STATE_ACTIVE) -> None:
-        """The executor moved to wire seq ``seq``: record it and tell the ground station now."""
+        """The current item or the mission state changed: record it and tell the ground station now."""
         self.service.set_current(seq)
-        self.conn.mav.send(self.service.mission_current(mission_state))
+        self.service.mission_state = mission_state
+        self.conn.mav.send(self.service.mission_current())
 
     def send_mission_item_reached(self, seq: int) -> None:
         self.conn.mav.send(self.service.item_reached(seq))

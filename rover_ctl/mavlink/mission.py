@@ -200,6 +200,8 @@ class MissionService:
         self.vehicle_home: Home | None = None
         """The daemon's real home; reported at seq 0 of a download when set."""
         self.current_seq = 0
+        self.mission_state = mav.MISSION_STATE_UNKNOWN
+        """MISSION_CURRENT.mission_state as the autopilot reports it."""
         self._commit = commit or (lambda mission, mission_type: None)
         self._set_current = set_current or (lambda seq: True)
         self._upload: _Upload | None = None
@@ -253,9 +255,11 @@ class MissionService:
         """The executor moved to wire seq ``seq``."""
         self.current_seq = seq
 
-    def mission_current(self, mission_state: int = 0):
-        """MISSION_CURRENT broadcast: current wire seq and the number of items after home."""
-        return mav.MAVLink_mission_current_message(self.current_seq, len(self.mission.items), mission_state, 0)
+    def mission_current(self, mission_state: int | None = None):
+        """MISSION_CURRENT broadcast: current wire seq, the number of items after home, and the
+        mission state (default: ``self.mission_state``, which the shell keeps up to date)."""
+        state = self.mission_state if mission_state is None else mission_state
+        return mav.MAVLink_mission_current_message(self.current_seq, len(self.mission.items), state, 0)
 
     @staticmethod
     def item_reached(seq: int):

@@ -1,0 +1,544 @@
+"""The autopilot: every decision of the rover's controller, pure.
+
+No sockets, no clock, no files, no logging: time comes in as ``t_s`` (vehicle time), readings
+come in as values, and what to do goes out as a command and typed events
+(``rover_ctl.autopilot.events``). The daemon (``rover_ctl.app.daemon``) is the loop around it.
+
+Inputs, from the shell:
+    set_home(home, frame)        the first GPS fix: the local frame the mission is placed in
+    on_vehicle(armed)            the vehicle's HEARTBEAT armed flag (the truth about arming)
+    on_wheels(WheelDistance)     every wheel reading (the wheel-speed meter of the PI loop)
+    step(t_s, pose, Readings)    at each control tick -> StepOutput(command, events, log_row)
+Ground-station requests (each decides at once and returns a ``Reply``: MAV_RESULT and reason;
+its events, the refusal STATUSTEXT among them, are collected with ``drain()``):
+    arm(arm, force), set_mode(custom_mode), mission_start(), return_to_launch(),
+    set_current(seq), mission_changed(mission, mission_type), guided_target(lat, lon, change_mode)
+State for the heartbeat and MISSION_CURRENT: ``state()``.
+
+One step: failsafes (``Failsafes``, on the failsafe clock: vehicle time, never going back) ->
+mode -> goal (AUTO/RTL: the mission executor; GUIDED: the guided target; LOITER: the station)
+-> path follower (planner, carrot) -> obstacle memory and fuzzy navigator -> wheel-speed PI.
+Its command is a ``WheelCommand``, or ``RELEASE`` (MANUAL: the radio drives). HOLD, disarmed,
+and failsafe holds brake to a stop, then send neutral.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from rover_ctl.autopilot import modes, prearm
+from rover_ctl.autopilot.events import (
+    ArmRequest, Event, FailsafeChanged, ItemReached, MissionComplete, MissionCurrent, MissionLoaded,
+    ModeChanged, PlanMade, StatusText,
+)  # fmt: skip
+from rover_ctl.autopilot.executor import NAV_COMMANDS, EventKind, MissionExecutor
+from rover_ctl.autopilot.executor import Mode as ExecutorMode
+from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsafes
+from rover_ctl.config import Config
+from rover_ctl.estimation.estimator import Pose
+from rover_ctl.estimation.frame import LocalFrame
+from rover_ctl.estimation.readings import RangeReading, WheelDistance
+from rover_ctl.fuzzy import RuleBase
+from rover_ctl.mission.model import Home, Mission
+from rover_ctl.navigation.navigator import Navigator
+from rover_ctl.navigation.planner import Fence, FenceError, PathFollower, Planner
+from rover_ctl.navigation.proximity import ObstacleMemory
+from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
+from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
+
+EN = tuple[float, float]
+
+LOG_COLUMNS = (
+    "t_s", "mode", "armed", "failsafe", "est_east_m", "est_north_m", "est_heading_rad", "est_speed_mps",
+    "est_healthy", "gps_ok", "goal_seq", "goal_east_m", "goal_north_m", "target_east_m", "target_north_m",
+    "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
+    "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
+    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "latency_ms",
+)  # fmt: skip
+"""Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
+RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
+                 6: "range_left_m", 7: "range_front_left_m"}  # fmt: skip
+STATION_SEQ = 0
+"""goal_seq of a path that is not to a mission item (GUIDED target, LOITER station)."""
+
+
+class ReleaseRc:
+    """The command "hand the RC channels back to the vehicle's radio" (MANUAL)."""
+
+    def __repr__(self) -> str:
+        return "RELEASE"
+
+
+RELEASE = ReleaseRc()
+Command = WheelCommand | ReleaseRc
+
+
+@dataclass(frozen=True)
+class Readings:
+    """What the shell measured for one step (ages in vehicle time)."""
+
+    ranges: Mapping[int, RangeReading] = field(default_factory=dict)
+    """The latest DISTANCE_SENSOR per orientation."""
+    vehicle_age_s: float = 0.0
+    """Since the last message of any kind from the vehicle."""
+    gcs_age_s: float = math.inf
+    """Since the last ground-station HEARTBEAT (inf: none yet)."""
+    gps_age_s: float = math.inf
+    """Since the last GPS fix (fix_type >= 2; inf: none yet)."""
+
+
+@dataclass(frozen=True)
+class StepOutput:
+    command: Command
+    events: tuple[Event, ...]
+    log_row: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Reply:
+    """The answer to a ground-station request: a MAV_RESULT and, when refused, why."""
+
+    result: int
+    reason: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == mav.MAV_RESULT_ACCEPTED
+
+
+@dataclass(frozen=True)
+class AutopilotState:
+    armed: bool
+    mode: RoverMode
+    system_status: int
+    """MAV_STATE: STANDBY disarmed, ACTIVE armed, CRITICAL while a failsafe holds or stops."""
+    home: Home | None
+    mission_state: MissionState
+    current_seq: int
+    failsafes: tuple[str, ...]
+
+
+ACCEPTED = Reply(mav.MAV_RESULT_ACCEPTED)
+
+
+class Autopilot:
+    """The rover's autopilot (see the module docstring)."""
+
+    def __init__(self, config: Config, rulebase: RuleBase) -> None:
+        self.config = config
+        robot = config.robot
+        self.wheels = WheelController(robot.wheel_radius_m, config.wheel_control)
+        self.navigator = Navigator(rulebase, config.navigator, robot.max_wheel_rpm, robot.wheel_radius_m)
+        self.failsafes = Failsafes(config.failsafe)
+        self.proximity = ObstacleMemory(config.proximity, robot.footprint_length_m, robot.footprint_width_m)
+        self.mode = RoverMode.HOLD
+        self.armed = False
+        self.home: Home | None = None
+        self.frame: LocalFrame | None = None
+        self.mission = Mission()
+        self.fence = Fence()
+        self.fence_error: str | None = None
+        self.planner: Planner | None = None
+        self.follower: PathFollower | None = None
+        self.executor: MissionExecutor | None = None
+        """Built once home gives the frame, rebuilt on every new mission."""
+        self.decision: FailsafeDecision | None = None
+        self._outbox: list[Event] = []
+        self._clock_s = -math.inf
+        self._last_step_s: float | None = None
+        self._commanded_speed_mps = 0.0
+        self._pose: Pose | None = None
+        self._ranges: Mapping[int, RangeReading] = {}
+        self._remembered_s: dict[int, float] = {}  # time of the last reading put into the memory
+        self._last_said: str | None = None
+        self._mission_started = False
+        self._reported_state: tuple[int, MissionState] | None = None
+        self._station_en: EN | None = None  # LOITER / GUIDED: the point held
+        self._guided_target_en: EN | None = None  # GUIDED: still driving to it
+        self._returning = False  # station keeping: driving back to the station
+
+    # ---- inputs from the shell -------------------------------------------------------------------
+
+    def set_home(self, home: Home, frame: LocalFrame) -> None:
+        """Home and the local frame (the first GPS fix); the mission is placed against it."""
+        self.home, self.frame = home, frame
+        self._load_mission()
+
+    def on_vehicle(self, armed: bool) -> None:
+        self.armed = armed
+
+    def on_wheels(self, reading: WheelDistance) -> None:
+        self.wheels.on_wheels(reading)
+
+    def drain(self) -> list[Event]:
+        """Events of the requests since the last step or drain, in order."""
+        self._report_mission_state()
+        events, self._outbox = self._outbox, []
+        return events
+
+    # ---- ground-station requests -----------------------------------------------------------------
+
+    def arm(self, arm: bool, force: bool = False) -> Reply:
+        if arm and self.armed:
+            return ACCEPTED
+        if arm and not force:
+            failed = prearm.failures(self._arming_inputs())
+            if failed:
+                for text in failed:
+                    self._say(f"PreArm: {text}", Severity.CRITICAL)
+                return Reply(mav.MAV_RESULT_FAILED, failed[0])
+        self._outbox.append(ArmRequest(arm, force))
+        return ACCEPTED
+
+    def set_mode(self, custom_mode: int, reason: str = "gcs") -> Reply:
+        why = modes.unsupported(custom_mode)
+        if why:
+            self._say(f"Mode change refused: {why}", Severity.WARNING)
+            return Reply(mav.MAV_RESULT_DENIED, why)
+        mode = RoverMode(custom_mode)
+        why = modes.refusal(mode, self._mode_context())
+        if why:
+            self._say(f"Mode change refused: {why}", Severity.WARNING)
+            return Reply(mav.MAV_RESULT_FAILED, why)
+        self._enter(mode, reason)
+        return ACCEPTED
+
+    def mission_start(self) -> Reply:
+        """MAV_CMD_MISSION_START: AUTO from the first item, jump counts cleared."""
+        why = modes.refusal(RoverMode.AUTO, self._mode_context())
+        if why:
+            self._say(f"Mission start refused: {why}", Severity.WARNING)
+            return Reply(mav.MAV_RESULT_FAILED, why)
+        self._executor_events(self.executor.restart())
+        self._enter(RoverMode.AUTO, "gcs", resume=False)
+        return ACCEPTED
+
+    def return_to_launch(self) -> Reply:
+        return self.set_mode(RoverMode.RTL)
+
+    def set_current(self, seq: int) -> bool:
+        """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT (wire seq)."""
+        if self.executor is None:
+            self._say("Mission seq cannot be set: no position yet", Severity.WARNING)
+            return False
+        try:
+            self._executor_events(self.executor.set_current(seq))
+        except ValueError as exc:
+            self._say(str(exc), Severity.WARNING)
+            return False
+        return True
+
+    def mission_changed(self, mission: Mission, mission_type: int) -> None:
+        """A new mission, fence or rally list was stored: AUTO stops (HOLD), RTL goes on."""
+        self.mission = mission
+        self._mission_started = False
+        if self.mode == RoverMode.AUTO:
+            self._enter(RoverMode.HOLD, "mission changed")
+        self._load_mission()
+        if self.mode == RoverMode.RTL and self.executor is not None:
+            self._executor_events(self.executor.rtl())
+
+    def guided_target(self, lat_deg: float, lon_deg: float, change_mode: bool = False) -> Reply:
+        """Drive to (lat, lon) in GUIDED (SET_POSITION_TARGET_GLOBAL_INT, DO_REPOSITION, a
+        MISSION_ITEM with current=2). ``change_mode``: switch to GUIDED first (DO_REPOSITION's
+        CHANGE_MODE flag); otherwise the rover must already be in GUIDED."""
+        why = self._guided_refusal(lat_deg, lon_deg, change_mode)
+        if why:
+            self._say(f"Guided target refused: {why}", Severity.WARNING)
+            return Reply(mav.MAV_RESULT_DENIED, why)
+        if self.mode != RoverMode.GUIDED:
+            reply = self.set_mode(RoverMode.GUIDED, "guided target")
+            if not reply.accepted:
+                return reply
+        self._guided_target_en = tuple(map(float, self.frame.to_enu(lat_deg, lon_deg)))
+        self._station_en = self._guided_target_en
+        self._returning = False
+        if self.follower is not None:
+            self.follower.reset()
+        self._say(f"Guided to {lat_deg:.7f} {lon_deg:.7f}")
+        return ACCEPTED
+
+    def _guided_refusal(self, lat_deg: float, lon_deg: float, change_mode: bool) -> str | None:
+        if not (math.isfinite(lat_deg) and math.isfinite(lon_deg)) or abs(lat_deg) > 90 or abs(lon_deg) > 180:
+            return "invalid location"
+        if lat_deg == 0 and lon_deg == 0:
+            return "invalid location"
+        if self.mode != RoverMode.GUIDED and not change_mode:
+            return "not in GUIDED mode"
+        if self.frame is None:
+            return "no position yet"
+        target = self.frame.to_enu(lat_deg, lon_deg)
+        if math.hypot(*target) > self.config.autopilot.arming_max_distance_m:
+            return f"{math.hypot(*target):.0f} m from home"
+        where = prearm.fence_violation(self.fence, target)
+        return f"target {where}" if where else None
+
+    # ---- state ---------------------------------------------------------------------------------
+
+    def state(self) -> AutopilotState:
+        status = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
+        if self.decision is not None and self.decision.action >= Action.HOLD:
+            status = mav.MAV_STATE_CRITICAL
+        reasons = self.decision.reasons if self.decision else ()
+        return AutopilotState(self.armed, self.mode, status, self.home, self.mission_state(), self._current_seq(), reasons)
+
+    def mission_state(self) -> MissionState:
+        """MISSION_CURRENT.mission_state, as ArduPilot reports it."""
+        if not self.mission.items:
+            return MissionState.NO_MISSION
+        if self.executor is None or not self._mission_started:
+            return MissionState.NOT_STARTED
+        if self.executor.complete:
+            return MissionState.COMPLETE
+        if self.mode == RoverMode.AUTO and self.executor.mode is ExecutorMode.AUTO:
+            return MissionState.ACTIVE
+        return MissionState.PAUSED
+
+    def _current_seq(self) -> int:
+        if not self.mission.items:
+            return 0
+        return self.executor.current_seq if self.executor is not None else 1
+
+    # ---- the step ------------------------------------------------------------------------------
+
+    def step(self, t_s: float, pose: Pose | None, readings: Readings) -> StepOutput:
+        """One control step at vehicle time ``t_s``; ``pose`` None until the estimator has one."""
+        dt_s = 1.0 / self.config.daemon.control_rate_hz
+        if self._last_step_s is not None:
+            dt_s = max(t_s - self._last_step_s, 1e-3)
+        self._last_step_s = t_s
+        self._pose, self._ranges = pose, readings.ranges
+        decision = self._failsafe(t_s, pose, readings)
+        row: dict[str, Any] = dict.fromkeys(LOG_COLUMNS, "")
+        row.update(t_s=t_s, mode=int(self.mode), armed=int(self.armed), failsafe="+".join(decision.reasons))
+        if pose is not None:
+            row.update(est_east_m=pose.east_m, est_north_m=pose.north_m, est_heading_rad=pose.heading_rad,
+                       est_speed_mps=pose.speed_mps, est_healthy=int(pose.healthy), gps_ok=int(pose.gps_ok))  # fmt: skip
+        for orientation, column in RANGE_COLUMNS.items():
+            if orientation in readings.ranges:
+                row[column] = readings.ranges[orientation].range_m
+        command = self._decide(t_s, dt_s, pose, decision, row)
+        if isinstance(command, WheelCommand):
+            row.update(steering_us=command.steering_us, throttle_us=command.throttle_us)
+        row.update(left_meas_rpm=self.wheels.meter.left_rpm, right_meas_rpm=self.wheels.meter.right_rpm)
+        return StepOutput(command, tuple(self.drain()), row)
+
+    def _failsafe(self, t_s: float, pose: Pose | None, readings: Readings) -> FailsafeDecision:
+        """Ask the failsafes, report what changed, apply a failsafe RTL and a stuck re-plan."""
+        p = self.config.failsafe
+        self._clock_s = max(self._clock_s, t_s)
+        position = (pose.east_m, pose.north_m) if pose is not None else None
+        # A vehicle that does not answer is not being driven: not a stuck rover.
+        commanded = 0.0 if readings.vehicle_age_s > p.vehicle_timeout_s else self._commanded_speed_mps
+        inputs = FailsafeInputs(
+            vehicle_age_s=readings.vehicle_age_s,
+            gcs_age_s=readings.gcs_age_s,
+            gps_age_s=readings.gps_age_s,
+            range_ages_s={o: max(0.0, t_s - r.time_s) for o, r in readings.ranges.items()},
+            estimator_healthy=pose is not None and pose.healthy,
+            inside_fence=position is None or self.planner is None or self.planner.is_inside_fence(position),
+            driving=self.armed and self.mode in modes.DRIVING_MODES,
+            commanded_speed_mps=commanded,
+            position_en=position,
+        )
+        decision = self.failsafes.update(self._clock_s, inputs)
+        previous = self.decision.reasons if self.decision else ()
+        self.decision = decision
+        for event in decision.events:
+            self._say(event.text, event.severity)
+        if decision.reasons != previous:
+            self._outbox.append(FailsafeChanged(decision.reasons, decision.action.name))
+        if decision.action == Action.RTL and self.mode in modes.FAILSAFE_RTL_MODES and self.executor is not None:
+            self._enter(RoverMode.RTL, "failsafe")
+        if decision.replan and self.follower is not None and pose is not None:
+            # Backed off after being stuck: mark the spot ahead as blocked and plan around it; each
+            # further try in the same episode blocks a wider circle (the first detour was too tight).
+            radius_m = self.config.planner.blocked_radius_m * max(1, decision.stuck_tries)
+            ahead_m = radius_m + self.config.robot.footprint_length_m
+            self.follower.block(t_s, (pose.east_m + ahead_m * math.cos(pose.heading_rad),
+                                      pose.north_m + ahead_m * math.sin(pose.heading_rad)), radius_m)  # fmt: skip
+        return decision
+
+    def _decide(self, t_s: float, dt_s: float, pose: Pose | None, decision: FailsafeDecision, row: dict[str, Any]) -> Command:
+        self._commanded_speed_mps = 0.0
+        if decision.action == Action.NEUTRAL:
+            return self.wheels.neutral()
+        if self.mode == RoverMode.MANUAL:
+            return RELEASE
+        if not self.armed or self.executor is None or pose is None:
+            return self.wheels.neutral()
+        if self.mode == RoverMode.HOLD or decision.action == Action.HOLD:
+            return self._hold(t_s, dt_s, pose)
+        position = (pose.east_m, pose.north_m)
+        if self.mode in (RoverMode.AUTO, RoverMode.RTL):
+            out = self.executor.update(t_s, position)
+            self._executor_events(out.events)
+            row.update(goal_seq=out.current_seq, speed_limit_mps=out.speed_limit_mps)
+            if self.executor.complete and self.mode == RoverMode.AUTO:
+                self._enter(RoverMode.HOLD, "mission complete")
+                return self._hold(t_s, dt_s, pose)
+            if out.hold or out.target_en is None:
+                return self._hold(t_s, dt_s, pose)
+            goal, speed, goal_seq = out.target_en, out.speed_limit_mps, out.current_seq
+        else:
+            goal = self._station_goal(position)
+            if goal is None:
+                return self._hold(t_s, dt_s, pose)
+            speed = min(self.config.executor.cruise_speed_mps, self.config.robot.max_speed_mps)
+            goal_seq = STATION_SEQ
+            row.update(goal_seq=goal_seq, speed_limit_mps=speed)
+        return self._drive(t_s, dt_s, pose, goal, speed, goal_seq, decision, row)
+
+    def _station_goal(self, position: EN) -> EN | None:
+        """GUIDED and LOITER: where to drive now, None to hold still."""
+        if self._guided_target_en is not None:
+            if math.dist(position, self._guided_target_en) > self.config.executor.acceptance_radius_m:
+                return self._guided_target_en
+            self._guided_target_en = None  # arrived: keep station here
+            self._say("Reached destination")
+            return None
+        if self._station_en is None:
+            self._station_en = position
+        radius_m = self.config.autopilot.loiter_radius_m
+        distance_m = math.dist(position, self._station_en)
+        if self._returning and distance_m <= radius_m / 2.0:
+            self._returning = False
+        elif not self._returning and distance_m > radius_m:
+            self._returning = True
+        return self._station_en if self._returning else None
+
+    def _drive(self, t_s: float, dt_s: float, pose: Pose, goal: EN, speed_mps: float, goal_seq: int,
+               decision: FailsafeDecision, row: dict[str, Any]) -> WheelCommand:  # fmt: skip
+        """Planner -> carrot -> obstacle memory -> fuzzy navigator -> wheel PI, towards ``goal``."""
+        row.update(goal_east_m=goal[0], goal_north_m=goal[1])
+        if decision.action == Action.BACK_OFF:
+            rpm = -self._speed_to_rpm(self.config.failsafe.back_off_speed_mps)
+            row.update(left_set_rpm=rpm, right_set_rpm=rpm)
+            return self.wheels.step(t_s, dt_s, rpm, rpm)
+        guidance = self.follower.update(t_s, (pose.east_m, pose.north_m), goal)
+        if guidance.replanned and guidance.path is not None and guidance.path.ok:
+            self._outbox.append(PlanMade(goal_seq, guidance.path.length_m, tuple(guidance.path.points)))
+        if guidance.target_en is None:
+            self._say_once(f"No path: {guidance.error}")
+            return self._hold(t_s, dt_s, pose)
+        row.update(target_east_m=guidance.target_en[0], target_north_m=guidance.target_en[1], cross_track_m=guidance.cross_track_m)
+        for orientation, reading in self._ranges.items():
+            if reading.time_s > self._remembered_s.get(orientation, -math.inf):
+                self._remembered_s[orientation] = reading.time_s
+                self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
+        ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()})
+        for orientation in decision.blocked_orientations:
+            ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
+        nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
+                                  ranges, speed_mps, guidance.remaining_m)  # fmt: skip
+        self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
+        row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
+                   target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
+        return self.wheels.step(t_s, dt_s, nav.left_rpm, nav.right_rpm)
+
+    def _speed_to_rpm(self, speed_mps: float) -> float:
+        return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0
+
+    def _hold(self, t_s: float, dt_s: float, pose: Pose | None) -> WheelCommand:
+        """Stop: brake actively (zero wheel-speed setpoints) while moving, then neutral."""
+        if pose is not None and abs(pose.speed_mps) > self.config.daemon.hold_speed_mps:
+            return self.wheels.step(t_s, dt_s, 0.0, 0.0)
+        return self.wheels.neutral()
+
+    # ---- modes and the mission -----------------------------------------------------------------
+
+    def _mode_context(self) -> modes.ModeContext:
+        has_position = self.executor is not None and self._pose is not None
+        return modes.ModeContext(has_position=has_position, has_mission=bool(self.mission.items))
+
+    def _enter(self, mode: RoverMode, reason: str, resume: bool = True) -> None:
+        previous, self.mode = self.mode, mode
+        if self.executor is not None:
+            if mode == RoverMode.AUTO and resume:
+                self._executor_events(self.executor.start())
+            elif mode == RoverMode.RTL:
+                self._executor_events(self.executor.rtl())
+            elif mode != RoverMode.AUTO:
+                self.executor.stop()
+        if mode == RoverMode.AUTO:
+            self._mission_started = True
+        if mode in modes.STATION_MODES:
+            pose = self._pose
+            self._station_en = (pose.east_m, pose.north_m) if pose is not None else None
+            self._guided_target_en = None
+            self._returning = False
+        if self.follower is not None:
+            self.follower.reset()
+        self.wheels.reset()
+        if previous != mode:
+            self._outbox.append(ModeChanged(mode, previous, reason))
+
+    def _load_mission(self) -> None:
+        """(Re)build the planner, path follower and executor for the current mission and home."""
+        if self.frame is None:
+            return  # done again once the first fix gives a frame
+        cfg = self.config
+        to_enu = self.frame.to_enu
+        self.fence, self.fence_error = Fence(), None
+        if self.mission.fence:
+            try:
+                self.fence = Fence.from_items(self.mission.fence, to_enu)
+            except FenceError as exc:  # the store held a fence the planner cannot use: refuse to arm
+                self.fence_error = str(exc)
+                self._say(f"Fence ignored: {exc}", Severity.WARNING)
+        self.planner = Planner(cfg.planner, cfg.robot, fence=self.fence)
+        self.follower = PathFollower(self.planner, cfg.planner)
+        self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, cfg.robot.max_speed_mps)
+        waypoints = tuple(tuple(map(float, to_enu(i.x, i.y))) for i in self.mission.items
+                          if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y))  # fmt: skip
+        total = sum(i.command in NAV_COMMANDS for i in self.mission.items)
+        self._outbox.append(MissionLoaded(total, len(self.mission.items), waypoints))
+
+    def _executor_events(self, events) -> None:
+        for event in events:
+            if event.kind is EventKind.ITEM_REACHED:
+                self._outbox.append(ItemReached(event.seq))
+            elif event.kind is EventKind.CURRENT:
+                self._outbox.append(MissionCurrent(event.seq, self.mission_state()))
+                self._reported_state = (event.seq, self.mission_state())
+            elif event.kind is EventKind.COMPLETE:
+                self._outbox.append(MissionComplete(event.seq))
+            elif event.kind is EventKind.STATUSTEXT:
+                self._say(event.text, event.severity)
+
+    def _report_mission_state(self) -> None:
+        """A MISSION_CURRENT whenever the mission state or current item changes (PAUSED on HOLD,
+        COMPLETE at the end, NO_MISSION after a clear), not only at the periodic broadcast."""
+        now = (self._current_seq(), self.mission_state())
+        if now != self._reported_state:
+            self._reported_state = now
+            self._outbox.append(MissionCurrent(*now))
+
+    def _arming_inputs(self) -> prearm.ArmingInputs:
+        pose = self._pose
+        position = (pose.east_m, pose.north_m) if pose is not None and self.frame is not None else None
+        last = self._last_step_s if self._last_step_s is not None else -math.inf
+        first = next((i for i in self.mission.items if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y)), None)
+        return prearm.ArmingInputs(
+            position_en=position,
+            estimator_healthy=pose is not None and pose.healthy,
+            range_ages_s={o: max(0.0, last - r.time_s) for o, r in self._ranges.items()},
+            needed_orientations=self.navigator.orientations,
+            rangefinder_timeout_s=self.config.failsafe.rangefinder_timeout_s,
+            fence=self.fence,
+            fence_error=self.fence_error,
+            first_waypoint_en=self.frame.to_enu(first.x, first.y) if first is not None and self.frame is not None else None,
+            max_distance_m=self.config.autopilot.arming_max_distance_m,
+        )
+
+    # ---- STATUSTEXT ----------------------------------------------------------------------------
+
+    def _say(self, text: str, severity: Severity = Severity.INFO) -> None:
+        self._outbox.append(StatusText(text, Severity(severity)))
+
+    def _say_once(self, text: str) -> None:
+        if text != self._last_said:
+            self._last_said = text
+            self._say(text, Severity.WARNING)

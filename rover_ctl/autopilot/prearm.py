@@ -1,0 +1,95 @@
+"""Pre-arm checks: every reason the rover must not arm now, as ArduPilot's "PreArm: ..." lines.
+
+Pure: the autopilot gathers ``ArmingInputs`` from what it knows (the last pose, rangefinder ages,
+the fence, the mission) and ``failures`` returns one short text per failed check, in a fixed
+order, or an empty list. Force-arming (ARM_FORCE_MAGIC) skips them all, as in ArduPilot.
+
+The checks:
+- no position: no GPS home yet, or the estimator has not initialised;
+- estimator unhealthy (position or heading uncertainty beyond its health limits);
+- a stored fence the planner cannot use (invalid geometry);
+- a rangefinder the rule base reads has not reported within ``rangefinder_timeout_s``;
+- the rover is outside an inclusion fence or inside an exclusion zone;
+- the mission's first waypoint, or the fence's nearest edge, is farther from home than
+  ``AutopilotParams.arming_max_distance_m``: a plan made for another place.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+from shapely.geometry import LinearRing, Point, Polygon
+
+from rover_ctl.navigation.planner import Fence
+
+EN = tuple[float, float]
+
+ORIENTATION_NAMES = {0: "front", 1: "front-right", 2: "right", 3: "back-right", 4: "back", 5: "back-left", 6: "left", 7: "front-left"}
+"""MAV_SENSOR_ORIENTATION yaw values -> names for the refusal texts."""
+
+
+@dataclass(frozen=True)
+class ArmingInputs:
+    position_en: EN | None
+    """The estimated position, None before the estimator has one."""
+    estimator_healthy: bool
+    range_ages_s: Mapping[int, float] = field(default_factory=dict)
+    """Age of the last reading per rangefinder orientation (absent: never heard)."""
+    needed_orientations: Sequence[int] = ()
+    """Orientations the rule base reads."""
+    rangefinder_timeout_s: float = 0.5
+    fence: Fence = field(default_factory=Fence)
+    fence_error: str | None = None
+    """Why the stored fence could not be used, if it could not."""
+    first_waypoint_en: EN | None = None
+    max_distance_m: float = math.inf
+
+
+def failures(inputs: ArmingInputs) -> list[str]:
+    """The failed checks (texts without the "PreArm: " prefix), empty when the rover may arm."""
+    found: list[str] = []
+    if inputs.position_en is None:
+        found.append("no position (waiting for GPS)")
+    elif not inputs.estimator_healthy:
+        found.append("estimator unhealthy")
+    if inputs.fence_error:
+        found.append(f"fence unusable: {inputs.fence_error}")
+    silent = [o for o in inputs.needed_orientations if inputs.range_ages_s.get(o, math.inf) > inputs.rangefinder_timeout_s]
+    if silent:
+        found.append("rangefinder missing: " + ", ".join(ORIENTATION_NAMES.get(o, str(o)) for o in silent))
+    if inputs.position_en is not None:
+        where = fence_violation(inputs.fence, inputs.position_en)
+        if where:
+            found.append(where)
+    if inputs.first_waypoint_en is not None:
+        distance = math.hypot(*inputs.first_waypoint_en)
+        if distance > inputs.max_distance_m:
+            found.append(f"first waypoint {distance:.0f} m from home")
+    distance = fence_distance_m(inputs.fence, (0.0, 0.0))
+    if distance is not None and distance > inputs.max_distance_m:
+        found.append(f"fence {distance:.0f} m from home")
+    return found
+
+
+def fence_violation(fence: Fence, point_en: EN) -> str | None:
+    """Why ``point_en`` breaches the fence (outside an inclusion, inside an exclusion), or None."""
+    p = Point(point_en)
+    if not all(Polygon(poly).covers(p) for poly in fence.inclusion_polygons) or not all(
+        math.dist(point_en, c.center_en) <= c.radius_m for c in fence.inclusion_circles
+    ):
+        return "outside the inclusion fence"
+    if any(Polygon(poly).contains(p) for poly in fence.exclusion_polygons) or any(
+        math.dist(point_en, c.center_en) < c.radius_m for c in fence.exclusion_circles
+    ):
+        return "inside a fence exclusion zone"
+    return None
+
+
+def fence_distance_m(fence: Fence, point_en: EN) -> float | None:
+    """Distance from ``point_en`` to the nearest fence boundary; None without a fence."""
+    p = Point(point_en)
+    distances = [LinearRing(poly).distance(p) for poly in (*fence.inclusion_polygons, *fence.exclusion_polygons)]
+    distances += [abs(math.dist(point_en, c.center_en) - c.radius_m) for c in (*fence.inclusion_circles, *fence.exclusion_circles)]
+    return min(distances) if distances else None
