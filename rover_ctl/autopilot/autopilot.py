@@ -269,10 +269,7 @@ class Autopilot:
             return "not in GUIDED mode"
         if self.frame is None:
             return "no position yet"
-        target = self.frame.to_enu(lat_deg, lon_deg)
-        if math.hypot(*target) > self.config.autopilot.arming_max_distance_m:
-            return f"{math.hypot(*target):.0f} m from home"
-        where = prearm.fence_violation(self.fence, target)
+        where = prearm.fence_violation(self.fence, self.frame.to_enu(lat_deg, lon_deg))
         return f"target {where}" if where else None
 
     # ---- state ---------------------------------------------------------------------------------

@@ -9,6 +9,8 @@
   mission (a fence-only or rally-only vehicle gives a fence or rally WPL) and the parts left out
   are named.
 * ``clear --connect URL [--type mission|fence|rally|all]``.
+* ``start --connect URL``: MAV_CMD_MISSION_START (AUTO from the first item); exit 0 accepted, 1
+  refused with the autopilot's reason (see ``rover_ctl.commands.control``).
 
 ``--connect`` is a pymavlink connection string; the default listens where the daemon sends by
 default (``udpin:127.0.0.1:14550``). Transfers show a progress bar on stderr; a timeout or a
@@ -27,22 +29,24 @@ DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
 CLEAR_TYPES = {"mission": 0, "fence": 1, "rally": 2, "all": 255}
 
 
+def link_options(p: argparse.ArgumentParser) -> None:
+    """--connect and the client's options (also used by `rover-ctl arm|disarm|mode`)."""
+    p.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
+                   help=f"pymavlink connection string of the autopilot (default {DEFAULT_CONNECT})")  # fmt: skip
+    p.add_argument("--source-system", type=int, default=255, metavar="ID", help="our MAVLink system id (255)")
+    p.add_argument("--source-component", type=int, default=190, metavar="ID", help="our component id (190)")
+    p.add_argument("--timeout", type=float, default=None, metavar="S",
+                   help="give up after this long without an answer (default 5 s)")  # fmt: skip
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
 def add_parser(subparsers) -> None:
-    parser = subparsers.add_parser("mission", help="check mission files; upload, download or clear over MAVLink")
+    parser = subparsers.add_parser("mission", help="check mission files; upload, download, clear or start over MAVLink")
     sub = parser.add_subparsers(dest="mission_command", metavar="ACTION", required=True)
 
     check = sub.add_parser("check", help="validate a mission file and print its summary")
     check.add_argument("file", help=".waypoints / .txt (QGC WPL 110) or .plan (QGroundControl)")
     check.set_defaults(func=cmd_check)
-
-    def link_options(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
-                       help=f"pymavlink connection string of the autopilot (default {DEFAULT_CONNECT})")  # fmt: skip
-        p.add_argument("--source-system", type=int, default=255, metavar="ID", help="our MAVLink system id (255)")
-        p.add_argument("--source-component", type=int, default=190, metavar="ID", help="our component id (190)")
-        p.add_argument("--timeout", type=float, default=None, metavar="S",
-                       help="give up after this long without an answer (default 5 s)")  # fmt: skip
-        p.add_argument("--quiet", action="store_true", help="no progress display")
 
     upload = sub.add_parser("upload", help="upload a mission file (mission, fence, rally) to the autopilot")
     upload.add_argument("file")
@@ -58,6 +62,10 @@ def add_parser(subparsers) -> None:
     clear.add_argument("--type", choices=sorted(CLEAR_TYPES), default="mission", help="what to clear (mission)")
     link_options(clear)
     clear.set_defaults(func=cmd_clear)
+
+    start = sub.add_parser("start", help="start the mission from its first item (MAV_CMD_MISSION_START)")
+    link_options(start)
+    start.set_defaults(func=cmd_start)
 
 
 def _load(path: str):
@@ -162,3 +170,10 @@ def cmd_clear(args: argparse.Namespace) -> int:
     print(f"cleared {args.type}")
     return 0
 
+
+
+def cmd_start(args: argparse.Namespace) -> int:
+    from rover_ctl.commands.control import run_command
+    from rover_ctl.vocabulary import mav
+
+    return run_command(args, "mission start", mav.MAV_CMD_MISSION_START, 0.0, 0.0)
