@@ -10,8 +10,10 @@ position; collisions come from the emulator's truth log (``collision`` records, 
 A second emulator endpoint (sysid 254, never allowed to drive) sets the emulator's SIM_* fault
 parameters (tests use it).
 
-Our GCS heartbeat goes out every ``GCS_HEARTBEAT_PERIOD_S`` of wall time and of sim time, whichever
-comes first: the daemon ages it in vehicle time, which in lockstep runs faster than the wall clock.
+Our GCS heartbeat goes out every ``GCS_HEARTBEAT_PERIOD_S`` of wall time or
+``GCS_HEARTBEAT_SIM_PERIOD_S`` of sim time (read from the emulator's ATTITUDE on the watcher
+endpoint), whichever comes first: the daemon ages it in vehicle time, which in lockstep runs faster
+than the wall clock.
 
 Ports are chosen free on 127.0.0.1: the vehicle link is TCP (the daemon connects to the
 emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: pymavlink serves
@@ -46,7 +48,7 @@ from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
 from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
-from rover_ctl.vocabulary import MissionState, RoverMode  # noqa: E402
+from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
 """The ``rover-ctl`` command of this interpreter."""
@@ -63,6 +65,10 @@ ARM_RETRY_S = 0.2
 STOP_TIMEOUT_S = 10.0
 """Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
 GCS_HEARTBEAT_PERIOD_S = 1.0
+"""Our GCS heartbeat period in wall time, as ground stations send it."""
+GCS_HEARTBEAT_SIM_PERIOD_S = 0.5
+"""...and in sim time: the daemon ages the heartbeat in vehicle time, which lockstep runs faster
+than the wall clock; half a second keeps it well inside any sensible GCS failsafe timeout."""
 
 
 def _copy_lines(stream: Any, path: Path) -> None:
@@ -336,8 +342,8 @@ class SimRun:
                 return msg.result
         return -1
 
-    def arm(self, timeout_s: float = 30.0) -> None:
-        """Arm as soon as the daemon reports a position (it refuses to arm before its first fix).
+    def arm(self, timeout_s: float = 30.0, force: bool = False) -> None:
+        """Arm as soon as the daemon's pre-arm checks pass (``force``: skip them); a refusal is retried.
         Its ACK means the request went on to the vehicle; the daemon drives once the vehicle's
         heartbeat says armed, so nothing waits here for the GCS heartbeat's flag (1 Hz of wall
         time is many seconds of lockstep sim time)."""
@@ -345,7 +351,7 @@ class SimRun:
             raise SimError(f"no position from the daemon within {timeout_s:g} s: {self.progress.last_text}")
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            if self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED:
+            if self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, ARM_FORCE_MAGIC if force else 0) == mav.MAV_RESULT_ACCEPTED:
                 return
             self.wait_for(lambda p: False, wall_timeout_s=ARM_RETRY_S)
         raise SimError(f"the rover did not arm within {timeout_s:g} s: {self.progress.last_text}")
@@ -387,6 +393,9 @@ class SimRun:
         while (msg := self.watcher.recv_msg()) is not None:
             if msg.get_type() == "PARAM_VALUE":
                 self._param_ack[msg.param_id] = float(msg.param_value)
+            elif msg.get_type() == "ATTITUDE":  # the emulator's own clock, at its sensor rate
+                self.progress.sim_time_s = max(self.progress.sim_time_s, msg.time_boot_ms / 1000.0)
+                self._heartbeat()
         self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())
         self._check_children()
 
@@ -396,7 +405,7 @@ class SimRun:
         due = time.monotonic() >= self._next_heartbeat_wall or p.sim_time_s >= self._next_heartbeat_sim
         if self.send_heartbeats and due:
             self._next_heartbeat_wall = time.monotonic() + GCS_HEARTBEAT_PERIOD_S
-            self._next_heartbeat_sim = p.sim_time_s + GCS_HEARTBEAT_PERIOD_S
+            self._next_heartbeat_sim = p.sim_time_s + GCS_HEARTBEAT_SIM_PERIOD_S
             self.gcs.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
     def _observe(self, msg: Any) -> None:

@@ -10,7 +10,7 @@ import pytest
 
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.app.report import read_jsonl
-from rover_ctl.app.sim import SimOptions, SimRun
+from rover_ctl.app.sim import SimError, SimOptions, SimRun
 
 ROOT = Path(__file__).resolve().parents[2]
 LOOP = ROOT / "missions" / "cmac_loop.waypoints"
@@ -19,7 +19,7 @@ pytestmark = pytest.mark.sitl
 MAV_STATE_CRITICAL = 5
 
 OVERRIDES = [
-    "failsafe.gcs_timeout_s=1.0",
+    "failsafe.gcs_timeout_s=2.0",
     "failsafe.gcs_action=hold",
     "failsafe.dead_reckoning_max_s=3.0",
     "failsafe.recovery_s=1.0",
@@ -64,8 +64,11 @@ def test_failsafes_trigger_and_clear(tmp_path):
         assert said(run, "FS GCS lost cleared", sim_timeout_s=None, wall_timeout_s=10.0)
         collisions = run.progress.collisions
 
-    reasons = {r for e in read_jsonl(out / "events.jsonl") if e["type"] == "failsafe" for r in e["reasons"]}
-    assert {"rangefinder 6", "GPS lost", "GPS lost too long", "vehicle link", "GCS lost"} <= reasons
+    changes = [e["reasons"] for e in read_jsonl(out / "events.jsonl") if e["type"] == "failsafe"]
+    assert {"rangefinder 6", "GPS lost", "GPS lost too long", "vehicle link", "GCS lost"} <= {r for c in changes for r in c}
+    # The GCS failsafe ages heartbeats in vehicle time: it fired only while our heartbeat was off,
+    # although lockstep runs several times faster than the wall clock the heartbeat is paced by.
+    assert sum("GCS lost" in b and "GCS lost" not in a for a, b in zip([[]] + changes, changes)) == 1
     assert collisions == 0
     # While the vehicle link was quiet every override the daemon sent was neutral.
     rows = [line.split(",") for line in (out / "control.csv").read_text().splitlines()]
@@ -105,13 +108,16 @@ def test_fenced_mission_avoids_the_exclusion_and_a_glitch_breaches_the_fence(tmp
     assert collisions == 0
 
 
-def test_unhealthy_estimator_holds(tmp_path):
-    """An estimator that never meets the health limit (set impossibly tight) keeps the rover still."""
+def test_unhealthy_estimator_refuses_to_arm_and_holds_when_forced(tmp_path):
+    """An estimator that never meets the health limit (set impossibly tight): the pre-arm check
+    refuses with its reason; force-armed, the failsafe keeps the rover still."""
     out = tmp_path / "run"
     options = SimOptions(mission=ROOT / "missions" / "cmac_jump.waypoints", out=out, timeout_s=60.0,
                          config_overrides=["estimator.health_max_position_sigma_m=0.001"])  # fmt: skip
     with SimRun(options) as run:
-        run.arm()
+        with pytest.raises(SimError, match="PreArm: estimator unhealthy"):
+            run.arm(timeout_s=2.0)
+        run.arm(force=True)
         run.start_mission()
         # The failsafe may trigger before our first heartbeat reaches the daemon (its STATUSTEXT is
         # then lost): the heartbeat's system status says it continuously.
