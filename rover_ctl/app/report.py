@@ -171,7 +171,7 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
         "loop_latency_p99_ms": round(float(np.percentile(latency, 99)), 3) if latency.size else math.nan,
         "waypoints_reached": len(reached),
         "waypoints_total": totals[-1] if totals else 0,
-        "failsafes": sorted({e["name"] for e in run.events if e["type"] == "failsafe" and e.get("active")}),
+        "failsafes": sorted({r for e in run.events if e["type"] == "failsafe" for r in e["reasons"]}),
     }
 
 
