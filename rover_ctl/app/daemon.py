@@ -47,7 +47,7 @@ from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
-from rover_ctl.app.logs import CsvLog, TlogWriter
+from rover_ctl.app.logs import CsvLog, LogClock, TlogWriter
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 
 log = logging.getLogger("rover_ctl.app.daemon")
@@ -98,7 +98,8 @@ class Daemon:
     def __init__(self, config: Config, rulebase: str = "default", log_dir: str | Path | None = None):
         self.config = config
         self.rulebase = load_rulebase(rulebase)
-        self.log_dir = Path(log_dir) if log_dir else (Path(config.daemon.log_dir) if config.daemon.log_dir else None)
+        self.log_dir = Path(log_dir) if log_dir else None
+        """This run's log folder (``rover-ctl run`` makes a new numbered one each start); None: no logs."""
         self.settings = config.daemon
         self._stop = False
         self.period_s = 1.0 / self.settings.control_rate_hz
@@ -137,6 +138,7 @@ class Daemon:
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
+        self.log_clock = LogClock(lambda: self.link.vehicle_time_s if self.lockstep else None)
         # Built once a GPS fix gives the local frame, rebuilt on every new mission.
         self.planner: Planner | None = None
         self.follower: PathFollower | None = None
@@ -162,7 +164,7 @@ class Daemon:
             command_retries=self.settings.command_retries,
         )
         if self.log_dir:
-            self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog"))
+            self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog", clock=self.log_clock))
             self.tlogs[-1].attach(self.link.conn)
         log.info("vehicle link %s: waiting for a heartbeat", cfg.link.vehicle_url)
         self.vehicle = self.link.wait_vehicle(self.settings.vehicle_wait_s, cancelled=lambda: self._stop)
@@ -177,7 +179,7 @@ class Daemon:
         store = MissionStore(Path(store_path).expanduser()) if store_path else None
         self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store)
         if self.log_dir:
-            self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog"))
+            self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog", clock=self.log_clock))
             self.tlogs[-1].attach(self.gcs.conn)
         log.info("GCS link %s ready", cfg.link.gcs_url)
         return True
