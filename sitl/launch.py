@@ -166,8 +166,8 @@ class SitlProcess:
         self.stop()
         raise SitlError(f"rover-sitl did not start (exit {self.returncode}): {self.last_error()}")
 
-    def wait(self, timeout_s: float) -> int:
-        """Wait for the emulator to exit by itself (``--duration-s``); kill it after ``timeout_s``."""
+    def wait(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
+        """Wait for the emulator to exit by itself (``--duration-s``, a kill); kill it after ``timeout_s``."""
         try:
             self.proc.wait(timeout_s)
         except subprocess.TimeoutExpired:
@@ -175,6 +175,10 @@ class SitlProcess:
         self.returncode = self.proc.wait()
         self._join()
         return self.returncode
+
+    def kill(self) -> None:
+        """SIGKILL: the vehicle vanishes without closing anything (tests of a lost link)."""
+        self.proc.kill()
 
     def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
         """SIGTERM (the emulator closes its endpoints and logs), then kill after ``timeout_s``."""
