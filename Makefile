@@ -1,33 +1,44 @@
 # Two commands on a fresh machine: `make demo` and `make test`.
-# Both (re)build .venv from pyproject.toml when it is missing or older than pyproject.toml.
+# Both share .venv and (re)install into it when it is missing or older than pyproject.toml: the
+# demo only the package (`.`), the tests the package and the `test` extra (pytest and the
+# third-party ground stations of the interop tests, MAVProxy and MAVSDK, which the demo does not
+# need). One stamp each; installing the test extra also satisfies the demo.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+DEMO_STAMP := $(VENV)/.installed-demo
+TEST_STAMP := $(VENV)/.installed-test
 # Parallel test workers; SITL-in-the-loop tests run in lockstep so they do not depend on load.
 TEST_WORKERS ?= 2
 
 .PHONY: demo test bench venv clean
 
-$(STAMP): pyproject.toml
+$(BIN)/python:
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
 	  { echo "error: Python 3.11+ is required (found $$($(PYTHON) --version 2>&1))"; exit 1; }
-	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
-	@touch $(STAMP)
 
-venv: $(STAMP)
+$(DEMO_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e .
+	@touch $@
+
+$(TEST_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@touch $@ $(DEMO_STAMP)
+
+venv: $(TEST_STAMP)
 
 # The main job: the emulator and the daemon drive a bundled mission among obstacles, with a report.
+# Each run is a new numbered folder under runs/demo/ (runs/demo/latest points to the newest).
 DEMO_CMD ?= $(BIN)/rover-ctl sim missions/cmac_loop.waypoints --world missions/worlds/cmac_loop.geojson --lockstep --out runs/demo
 
 # `rover-ctl sim` exits 1 when the mission ran but did not succeed (e.g. a collision): the run and
 # its report are the demo, so that counts as done; any other failure (2 bad input, crash) fails.
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	@echo "$(DEMO_CMD)"; $(DEMO_CMD); status=$$?; [ $$status -le 1 ] || exit $$status
 
-test: $(STAMP)
+test: $(TEST_STAMP)
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) $(PYTEST_ARGS)
 
 # Benchmarks get their own venv: the competitors (pyfuzzylite, scikit-fuzzy) pin numpy < 2, which

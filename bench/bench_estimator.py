@@ -30,12 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.lockstep_client import LockstepClient, sitl_process
 from rover_ctl.config import EstimatorParams, RobotParams
 from rover_ctl.estimation.estimator import GpsVerdict, PoseEstimator
 from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
 from rover_ctl.mavlink.vehicle import decode_gps
 from rover_ctl.estimation.readings import Attitude, WheelDistance
+from sitl.client import LockstepClient
+from sitl.launch import rover_sitl
 
 HOME = (-35.363261, 149.165230, 584.0)
 WARMUP_S = 10.0
@@ -103,8 +104,8 @@ def run_once(seed: int, duration_s: float, gps: dict | None = None, faults: bool
         flags += [f"--set=gps.{key}={value}" for key, value in (gps or {}).items()]
         if world is not None:
             flags += ["--world", str(world)]
-        with sitl_process(*flags, start_timeout_s=READY_TIMEOUT_S) as url:
-            client = LockstepClient(url, timeout_s=READY_TIMEOUT_S)
+        with rover_sitl("--lockstep", *flags, start_timeout_s=READY_TIMEOUT_S) as sitl:
+            client = LockstepClient(sitl.url, timeout_s=READY_TIMEOUT_S)
             client.arm()
 
             def on_frame(t_s: float, msgs: list):

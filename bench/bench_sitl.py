@@ -2,7 +2,7 @@
 
 - alone: ``--speedup inf`` free running for ``duration`` sim seconds, telemetry sent to a UDP port
   nobody reads; timed from the emulator's ready line to its stopped line (no start-up cost).
-- lockstep: ``--lockstep`` with bench/lockstep_client.py as the controller (arms, sends an RC
+- lockstep: ``--lockstep`` with ``sitl.client.LockstepClient`` as the controller (arms, sends an RC
   override every frame, answers every TIMESYNC marker); timed by the client over the run.
 
 Both on the cmac_loop world (six obstacles for the rangefinders to ray-cast), 0.02 s frames.
@@ -11,14 +11,11 @@ Goals (issue 2): >= 50x alone, >= 20x with a controller in lockstep, on 2 cores.
 
 from __future__ import annotations
 
-import socket
 import statistics
-import subprocess
-import sys
-import time
 from pathlib import Path
 
-from bench.lockstep_client import LockstepClient, sitl_process
+from sitl.client import LockstepClient
+from sitl.launch import free_port, rover_sitl
 
 ROOT = Path(__file__).resolve().parent.parent
 WORLD = ROOT / "missions" / "worlds" / "cmac_loop.geojson"
@@ -31,26 +28,19 @@ def _world_flags() -> list[str]:
 
 
 def alone_rtf(duration_s: float) -> float:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        sink = probe.getsockname()[1]
-    argv = [sys.executable, "-m", "sitl", "--speedup", "inf", "--duration-s", str(duration_s),
-            "--endpoint", f"udpout:127.0.0.1:{sink}", *_world_flags()]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    ready_at = stopped_at = None
-    for line in proc.stdout:
-        if line.startswith("rover-sitl: ready"):
-            ready_at = time.perf_counter()
-        elif line.startswith("rover-sitl: stopped"):
-            stopped_at = time.perf_counter()
-    if proc.wait() != 0 or ready_at is None or stopped_at is None:
-        raise RuntimeError(f"rover-sitl failed: {proc.stderr.read().strip()}")
-    return duration_s / (stopped_at - ready_at)
+    sink = free_port()
+    flags = ["--speedup", "inf", "--duration-s", str(duration_s), *_world_flags()]
+    with rover_sitl(*flags, endpoints=[f"udpout:127.0.0.1:{sink}"]) as sitl:
+        status = sitl.wait(timeout_s=max(60.0, duration_s))
+        stopped_at = sitl.line_time("rover-sitl: stopped")
+    if status != 0 or stopped_at is None:
+        raise RuntimeError(f"rover-sitl failed (exit {status}): {sitl.last_error()}")
+    return duration_s / (stopped_at - sitl.ready_at)
 
 
 def lockstep_rtf(duration_s: float) -> tuple[float, int]:
-    with sitl_process(*_world_flags()) as url:
-        client = LockstepClient(url)
+    with rover_sitl("--lockstep", *_world_flags()) as sitl:
+        client = LockstepClient(sitl.url)
         client.arm()
         stats = client.run(duration_s, lambda t_s, msgs: (1650, 1500))
         client.close()

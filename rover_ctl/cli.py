@@ -2,8 +2,9 @@
 exposes ``add_parser(subparsers)``, which registers its parser and sets ``func(args) -> int``.
 
 Errors meant for the user are raised as ``UserError`` or ``ConfigError`` (one-line messages) and
-printed as ``rover-ctl: error: ...`` with exit status 2. Run it as ``rover-ctl`` or
-``python -m rover_ctl``.
+printed as ``rover-ctl: error: ...`` with exit status 2; a bad flag is one such line too (no usage
+block: under a service manager every start-up error is one line in the journal). Run it as
+``rover-ctl`` or ``python -m rover_ctl``.
 """
 
 from __future__ import annotations
@@ -23,8 +24,15 @@ class UserError(Exception):
     """A problem the user can fix (bad flag value, unreadable file, refused request)."""
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (subcommand parsers inherit the class)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="rover-ctl",
         description="Controller for GPS-guided skid-steer rovers over MAVLink.",
     )

@@ -288,7 +288,15 @@ class DaemonParams:
     hold_speed_mps: float = 0.05
     """Below this estimated speed a hold counts as stopped."""
     log_dir: str = ""
-    """Directory for vehicle.tlog, gcs.tlog and control.csv; empty: no logs."""
+    """Where each start writes a new numbered run folder (vehicle.tlog, gcs.tlog, control.csv,
+    events.jsonl) and the ``latest`` link to it; empty: no logs."""
+    log_max_total_mb: float = 1000.0
+    """Budget of all run folders together: at each start the oldest are removed (never the new
+    one) until the rest fit; 0 = no limit. A lockstep run of cmac_loop (155 s of sim time) writes
+    about 4 MB."""
+    link_chatter_s: float = 60.0
+    """pymavlink's reconnect messages: each distinct line is logged at most once per this (wall
+    clock), with a count of the repeats."""
 
 
 @dataclass

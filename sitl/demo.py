@@ -1,9 +1,9 @@
 """``python -m sitl.demo``: the emulator under a scripted drive, printing what a controller sees.
 
-Starts ``rover-sitl --lockstep`` as a separate process on the cmac_loop world (when the checkout
-has it), connects as a minimal pymavlink controller (bench/lockstep_client.py), arms, and drives
-a fixed pattern with RC overrides: straight, a right arc, a pivot, straight again, stop. Once per
-sim second it prints time, GPS, heading, wheel distances and the ranges; then a summary.
+Starts ``rover-sitl --lockstep`` as a separate process (``sitl.launch``) on the cmac_loop world
+when the checkout has it, connects as a minimal pymavlink controller (``sitl.client``), arms, and
+drives a fixed pattern with RC overrides: straight, a right arc, a pivot, straight again, stop.
+Once per sim second it prints time, GPS, heading, wheel distances and the ranges; then a summary.
 """
 
 from __future__ import annotations
@@ -17,11 +17,10 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:  # bench/ is a directory of the checkout, not an installed package
-    sys.path.insert(0, str(ROOT))
-from bench.lockstep_client import LockstepClient, sitl_process  # noqa: E402
+from sitl.client import LockstepClient
+from sitl.launch import rover_sitl
 
+ROOT = Path(__file__).resolve().parent.parent
 WORLD = ROOT / "missions" / "worlds" / "cmac_loop.geojson"
 PATTERN = [  # (until sim s, throttle us, steering us, what)
     (18.0, 1800, 1500, "straight"),  # north towards cmac_loop's barrel, 20 m ahead
@@ -84,8 +83,8 @@ def main(argv: list[str] | None = None) -> int:
     flags = ["--seed", str(args.seed)] + (["--world", str(WORLD)] if WORLD.exists() else [])
     console.print(f"[bold]rover-sitl demo[/] world: {WORLD.name if WORLD.exists() else 'empty'}; scripted drive "
                   + ", ".join(f"{what} until {until:g} s" for until, _t, _s, what in PATTERN))
-    with sitl_process(*flags) as url:
-        client = LockstepClient(url)
+    with rover_sitl("--lockstep", *flags) as sitl:
+        client = LockstepClient(sitl.url)
         client.arm()
         console.print("armed (MANUAL); driving with RC overrides, lockstep")
         watch = Watch(console)

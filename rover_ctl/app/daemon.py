@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rover_ctl.app.logs import CsvLog, TlogWriter
+from rover_ctl.app.logs import CsvLog, LogClock, TlogWriter
 from rover_ctl.autopilot.autopilot import LOG_COLUMNS, RELEASE, Autopilot, Readings, StepOutput
 from rover_ctl.autopilot.events import ArmRequest, Event, ItemReached, MissionCurrent, StatusText
 from rover_ctl.config import Config
@@ -88,7 +88,8 @@ class Daemon:
     def __init__(self, config: Config, rulebase: str = "default", log_dir: str | Path | None = None):
         self.config = config
         self.rulebase = load_rulebase(rulebase)
-        self.log_dir = Path(log_dir) if log_dir else (Path(config.daemon.log_dir) if config.daemon.log_dir else None)
+        self.log_dir = Path(log_dir) if log_dir else None
+        """This run's log folder (``rover-ctl run`` makes a new numbered one each start); None: no logs."""
         self.settings = config.daemon
         self._stop = False
         self.period_s = 1.0 / self.settings.control_rate_hz
@@ -116,6 +117,7 @@ class Daemon:
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
+        self.log_clock = LogClock(lambda: self.link.vehicle_time_s if self.lockstep else None)
 
     # ---- lifecycle -----------------------------------------------------------------------------
 
@@ -137,7 +139,7 @@ class Daemon:
             command_retries=self.settings.command_retries,
         )
         if self.log_dir:
-            self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog"))
+            self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog", clock=self.log_clock))
             self.tlogs[-1].attach(self.link.conn)
         log.info("vehicle link %s: waiting for a heartbeat", cfg.link.vehicle_url)
         self.vehicle = self.link.wait_vehicle(self.settings.vehicle_wait_s, cancelled=lambda: self._stop)
@@ -154,7 +156,7 @@ class Daemon:
         self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store)
         self._apply(self.autopilot.drain())
         if self.log_dir:
-            self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog"))
+            self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog", clock=self.log_clock))
             self.tlogs[-1].attach(self.gcs.conn)
         log.info("GCS link %s ready", cfg.link.gcs_url)
         return True

@@ -1,14 +1,14 @@
 """``rover-ctl sim``: run a mission against the emulator, end to end, and write a report.
 
 Three processes, as in the field: ``rover-sitl`` (the rover), ``rover-ctl run`` (the daemon) and
-this one, which plays the ground station. ``SimRun`` starts the two children (``sys.executable
--m ...``), waits for the emulator's ``ready`` line, uploads the mission over the GCS link with the
-mission client, arms, starts AUTO and watches the GCS link until the mission completes or the
-sim-time budget runs out. Progress comes from message fields only: MISSION_CURRENT (``seq``,
-``total``, ``mission_state``: COMPLETE ends the run), MISSION_ITEM_REACHED, HEARTBEAT, the
-position; collisions come from the emulator's truth log (``collision`` records, read as it grows).
-A second emulator endpoint (sysid 254, never allowed to drive) sets the emulator's SIM_* fault
-parameters (tests use it).
+this one, which plays the ground station. ``SimRun`` starts the emulator with ``sitl.launch`` (it
+returns once the emulator's ``ready`` line came), then the daemon (``sys.executable -m rover_ctl
+run --log-run OUT``), uploads the mission over the GCS link with the mission client, arms, starts
+AUTO and watches the GCS link until the mission completes or the sim-time budget runs out.
+Progress comes from message fields only: MISSION_CURRENT (``seq``, ``total``, ``mission_state``:
+COMPLETE ends the run), MISSION_ITEM_REACHED, HEARTBEAT, the position; collisions come from the
+emulator's truth log (``collision`` records, read as it grows). A second emulator endpoint (sysid
+254, never allowed to drive) sets the emulator's SIM_* fault parameters (tests use it).
 
 Our GCS heartbeat goes out every ``GCS_HEARTBEAT_PERIOD_S`` of wall time or
 ``GCS_HEARTBEAT_SIM_PERIOD_S`` of sim time (read from the emulator's ATTITUDE on the watcher
@@ -20,8 +20,10 @@ emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: py
 every peer that has spoken, so a second ground station such as MAVProxy can attach to a running
 sim), the watcher UDP.
 
-The report (``rover_ctl.app.report``) is written into the output folder with both tlogs, the control
-CSV, the event log, the emulator's truth log and the processes' logs.
+``SimOptions.out`` is this run's folder: the daemon writes its logs into it as they are (the
+``rover-ctl sim`` command line makes it a new numbered run folder under ``--out``), and the report
+(``rover_ctl.app.report``) is written there beside both tlogs, the control CSV, the event log, the
+emulator's truth log and the processes' logs.
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,6 +50,8 @@ from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
+from sitl.launch import SitlError, SitlProcess, free_port, stop_process  # noqa: E402
+from sitl.launch import start as start_sitl  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
 """The ``rover-ctl`` command of this interpreter."""
@@ -69,13 +72,6 @@ GCS_HEARTBEAT_PERIOD_S = 1.0
 GCS_HEARTBEAT_SIM_PERIOD_S = 0.5
 """...and in sim time: the daemon ages the heartbeat in vehicle time, which lockstep runs faster
 than the wall clock; half a second keeps it well inside any sensible GCS failsafe timeout."""
-
-
-def _copy_lines(stream: Any, path: Path) -> None:
-    with open(path, "a") as handle:
-        for line in stream:
-            handle.write(line)
-            handle.flush()
 
 
 class TruthTail:
@@ -108,16 +104,11 @@ class SimError(RuntimeError):
     """The run could not be set up or a child process failed; one line."""
 
 
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 @dataclass
 class SimOptions:
     mission: Path
     out: Path
+    """This run's folder (logs, report); made if missing."""
     world: Path | None = None
     obstacles: int | None = None
     seed: int = 1
@@ -189,7 +180,7 @@ class SimRun:
         self.targets = {seq: (item.x, item.y) for seq, item in enumerate(self.mission.items, 1) if item.is_global and (item.x or item.y)}
         self.progress = Progress(waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items))
         self.world_path: Path | None = options.world
-        self.sitl: subprocess.Popen | None = None
+        self.sitl: SitlProcess | None = None
         self.daemon: subprocess.Popen | None = None
         self.gcs: MissionClient | None = None
         self.watcher: Any = None
@@ -211,11 +202,10 @@ class SimRun:
 
     # ---- processes -------------------------------------------------------------------------
 
-    def _sitl_command(self) -> list[str]:
+    def _sitl_flags(self) -> list[str]:
+        """The emulator's flags (``sitl.launch`` adds the endpoints)."""
         o = self.options
-        cmd = [sys.executable, "-m", "sitl", "--endpoint", f"tcpin:127.0.0.1:{self.vehicle_port}",
-               "--endpoint", f"udpin:127.0.0.1:{self.watch_port}", "--seed", str(o.seed),
-               "--truth-log", str(self.out / "truth.jsonl")]  # fmt: skip
+        cmd = ["--seed", str(o.seed), "--truth-log", str(self.out / "truth.jsonl")]
         cmd += ["--lockstep"] if o.lockstep else ["--speedup", f"{o.speedup:g}"]
         heading = 0.0
         if o.world is not None:
@@ -237,7 +227,7 @@ class SimRun:
     def _daemon_command(self) -> list[str]:
         o = self.options
         cmd = [*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{self.vehicle_port}",
-               "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-dir", str(self.out),
+               "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-run", str(self.out),
                "--mission-store", ""]  # fmt: skip
         for item in o.config_overrides:
             cmd += ["--set", item]
@@ -245,10 +235,12 @@ class SimRun:
 
     def start(self) -> None:
         """Start both children, connect the GCS and the watcher, upload the mission."""
-        sitl_log = open(self.out / "sitl.log", "w")
-        self._logs.append(sitl_log)
-        self.sitl = subprocess.Popen(self._sitl_command(), stdout=subprocess.PIPE, stderr=sitl_log, text=True)
-        self._wait_ready()
+        endpoints = [f"tcpin:127.0.0.1:{self.vehicle_port}", f"udpin:127.0.0.1:{self.watch_port}"]
+        try:
+            self.sitl = start_sitl(*self._sitl_flags(), endpoints=endpoints, stdout_path=self.out / "sitl.out",
+                                   stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
+        except SitlError as exc:
+            raise SimError(str(exc)) from None
         daemon_log = open(self.out / "daemon.log", "w")
         self._logs.append(daemon_log)
         self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
@@ -267,41 +259,19 @@ class SimRun:
                     raise SimError(f"daemon: no heartbeat on the GCS link within {GCS_CONNECT_TIMEOUT_S:g} s ({exc}); see {self.out / 'daemon.log'}") from None
         self.gcs.upload(self.mission)
 
-    def _wait_ready(self) -> None:
-        deadline = time.monotonic() + SITL_READY_TIMEOUT_S
-        lines = []
-        while time.monotonic() < deadline:
-            line = self.sitl.stdout.readline()
-            if not line:
-                break
-            lines.append(line.strip())
-            if line.startswith("rover-sitl: ready"):
-                (self.out / "sitl.out").write_text("\n".join(lines) + "\n")
-                # Keep draining its stdout so the emulator never blocks on a full pipe.
-                threading.Thread(target=_copy_lines, args=(self.sitl.stdout, self.out / "sitl.out"), daemon=True).start()
-                return
-        self.sitl.poll()
-        log_text = (self.out / "sitl.log").read_text() if (self.out / "sitl.log").exists() else ""
-        last = (log_text.strip().splitlines() or lines or ["no output"])[-1]
-        raise SimError(f"rover-sitl did not start: {last}")
-
     def _check_children(self) -> None:
-        for name, proc, log_name in (("rover-sitl", self.sitl, "sitl.log"), ("rover-ctl run", self.daemon, "daemon.log")):
-            if proc is not None and proc.poll() is not None:
-                text = (self.out / log_name).read_text(errors="replace").strip().splitlines()
-                raise SimError(f"{name} exited with status {proc.returncode}: {text[-1] if text else 'no output'}")
+        if self.sitl is not None and self.sitl.poll() is not None:
+            raise SimError(f"rover-sitl exited with status {self.sitl.returncode}: {self.sitl.last_error()}")
+        if self.daemon is not None and self.daemon.poll() is not None:
+            text = (self.out / "daemon.log").read_text(errors="replace").strip().splitlines()
+            raise SimError(f"rover-ctl run exited with status {self.daemon.returncode}: {text[-1] if text else 'no output'}")
 
     def stop(self) -> None:
-        """Daemon first (it sets motors neutral), then the emulator; kill what does not exit."""
-        for proc, sig in ((self.daemon, signal.SIGINT), (self.sitl, signal.SIGTERM)):
-            if proc is None or proc.poll() is not None:
-                continue
-            proc.send_signal(sig)
-            try:
-                proc.wait(STOP_TIMEOUT_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        """Daemon first (SIGINT: it sets motors neutral), then the emulator; kill what does not exit."""
+        if self.daemon is not None:
+            stop_process(self.daemon, signal.SIGINT, STOP_TIMEOUT_S)
+        if self.sitl is not None:
+            self.sitl.stop(STOP_TIMEOUT_S)
         self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())  # flushed at exit
         for conn in (self.gcs, self.watcher):
             if conn is not None:

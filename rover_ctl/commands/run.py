@@ -1,18 +1,27 @@
 """``rover-ctl run``: the controller daemon (see rover_ctl.app.daemon and docs/daemon.md).
 
-Exit codes (sysexits): 0 stopped by SIGINT/SIGTERM, 2 bad flag or config (``rover-ctl`` usage
-errors), 69 no vehicle answered, 70 the control loop failed. A service manager restarts on
-69/70 and does not on 2.
+Exit codes (sysexits): 0 stopped by SIGINT/SIGTERM, 2 a start-up error (bad flag, link URL,
+config, rule base or log dir: one line on stderr, nothing started), 69 no vehicle answered or a
+link could not be opened, 70 the control loop failed. A service manager restarts on 69/70 and
+does not on 2 (docs/rover-ctl.service).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import re
 import signal
 import sys
 
 from rover_ctl.config import ConfigError, load_config
+
+EXIT_UNAVAILABLE = 69
+"""sysexits EX_UNAVAILABLE: a link could not be opened (may work on a restart)."""
+NET_SCHEMES = ("tcp", "tcpin", "udp", "udpin", "udpout", "udpbcast")
+"""pymavlink connection-string schemes taking HOST:PORT."""
+SERIAL_DEVICE = re.compile(r"^(/|\./|\.\./|COM\d+)[^,]*(,\d+)?$")
+"""A serial device path with an optional baud rate (``/dev/ttyACM0,115200``)."""
 
 
 def add_parser(subparsers) -> None:
@@ -22,10 +31,29 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--config", metavar="FILE", help="TOML config file (sections as rover_ctl.config)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="override one config value (repeatable)")
     parser.add_argument("--rulebase", default="default", metavar="NAME|FILE", help="fuzzy rule base: shipped name (paper, default) or a TOML file")
-    parser.add_argument("--log-dir", metavar="DIR", help="write vehicle.tlog, gcs.tlog, control.csv and events.jsonl here")
+    logs = parser.add_mutually_exclusive_group()
+    logs.add_argument("--log-dir", metavar="DIR", help="each start writes a new numbered run folder here (vehicle.tlog, gcs.tlog, control.csv, events.jsonl) and DIR/latest (default: daemon.log_dir)")
+    logs.add_argument("--log-run", metavar="DIR", help="write this run's logs into DIR itself, no numbering (rover-ctl sim, which numbers its own runs)")
     parser.add_argument("--mission-store", metavar="FILE", help="where the uploaded mission persists (default: gcs.mission_store_path; '' for none)")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     parser.set_defaults(func=run)
+
+
+def check_url(url: str, flag: str) -> None:
+    """Refuse a connection string pymavlink would misread (``bogus`` would be opened as a serial
+    port, ``nonsense:`` as UDP) before anything starts. Whether the peer is there is the link's
+    business: that may change by the next start."""
+    from rover_ctl.cli import UserError
+
+    scheme, sep, rest = url.partition(":")
+    if sep and scheme in NET_SCHEMES:
+        host, sep, port = rest.rpartition(":")
+        if sep and host and port.isdigit() and 0 < int(port) < 65536:
+            return
+        raise UserError(f"{flag} {url}: expected {scheme}:HOST:PORT")
+    if SERIAL_DEVICE.match(url):
+        return
+    raise UserError(f"{flag} {url!r}: expected SCHEME:HOST:PORT ({', '.join(NET_SCHEMES)}) or a serial device /dev/...[,BAUD]")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,22 +70,46 @@ def run(args: argparse.Namespace) -> int:
         config = load_config(args.config, overrides)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
+    except (OSError, UnicodeDecodeError) as exc:  # a directory, no permission, not text
+        raise UserError(f"--config {args.config}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    check_url(config.link.vehicle_url, "--vehicle")
+    check_url(config.link.gcs_url, "--gcs")
+
+    from rover_ctl.app.daemon import Daemon
+    from rover_ctl.app.logs import LogDirError, given_run_folder, new_run_folder, quiet_pymavlink
+    from rover_ctl.fuzzy import RuleBaseError
+
+    try:
+        daemon = Daemon(config, rulebase=args.rulebase)
+    except (RuleBaseError, OSError, ValueError) as exc:
+        raise UserError(f"--rulebase {args.rulebase}: {exc}") from None
+    root = args.log_dir if args.log_dir is not None else config.daemon.log_dir
+    try:
+        if args.log_run:
+            daemon.log_dir = given_run_folder(args.log_run)
+        elif root:
+            daemon.log_dir = new_run_folder(root, config.daemon.log_max_total_mb)
+    except LogDirError as exc:
+        raise UserError(str(exc)) from None
+
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
-    from rover_ctl.app.daemon import Daemon
-    from rover_ctl.fuzzy import RuleBaseError
-
-    try:
-        daemon = Daemon(config, rulebase=args.rulebase, log_dir=args.log_dir)
-    except (RuleBaseError, FileNotFoundError, ValueError) as exc:
-        raise UserError(f"--rulebase {args.rulebase}: {exc}") from None
+    quiet_pymavlink(logging.getLogger("pymavlink"), config.daemon.link_chatter_s)
+    if daemon.log_dir:
+        logging.getLogger("rover_ctl.app.daemon").info("logs: %s", daemon.log_dir)
 
     def on_signal(signum, frame) -> None:
         daemon.stop()
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    return daemon.run()
+    try:
+        return daemon.run()
+    except OSError as exc:  # the GCS link cannot be opened (port taken, no such address): may work later
+        daemon.close()
+        print(f"rover-ctl: error: GCS link {config.link.gcs_url}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_UNAVAILABLE
+

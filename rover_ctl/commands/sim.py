@@ -30,7 +30,7 @@ def add_parser(subparsers) -> None:
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument("--lockstep", action="store_true", help="lockstep with the emulator (default; deterministic, as fast as possible)")
     timing.add_argument("--speedup", type=_positive, metavar="X", help="free-running emulator at X times real time")
-    parser.add_argument("--out", type=Path, metavar="DIR", help="report folder (default runs/<mission>-<time>)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="each sim writes a new numbered run folder here, with its logs and report, and DIR/latest (default runs/<mission>)")
     parser.add_argument("--json", action="store_true", help="print the metrics JSON on stdout (progress goes to stderr)")
     parser.add_argument("--timeout-s", type=_positive, default=600.0, metavar="S", help="sim-time budget of the mission (default 600)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="daemon config override (repeatable)")
@@ -43,16 +43,23 @@ def run(args: argparse.Namespace) -> int:
     from rich.live import Live
     from rich.table import Table
 
-    from rover_ctl.cli import UserError
-    from rover_ctl.mission.files import MissionFileError
+    from rover_ctl.app.logs import LogDirError, new_run_folder
     from rover_ctl.app.report import ReportError
     from rover_ctl.app.sim import Progress, SimError, SimOptions, simulate
+    from rover_ctl.cli import UserError
+    from rover_ctl.config import load_config
+    from rover_ctl.mission.files import MissionFileError, load_mission
 
     if args.obstacles is not None and args.obstacles < 0:
         raise UserError(f"--obstacles {args.obstacles}: expected a count >= 0")
     if args.world is not None and not args.world.is_file():
         raise UserError(f"--world {args.world}: no such file")
-    out = args.out or Path("runs") / f"{args.mission.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    budget_mb = load_config(None, args.set).daemon.log_max_total_mb  # also refuses a bad --set now
+    try:
+        load_mission(args.mission)  # refused before a run folder is made for it
+        out = new_run_folder(args.out or Path("runs") / args.mission.stem, budget_mb)
+    except (MissionFileError, LogDirError) as exc:
+        raise UserError(str(exc)) from None
     options = SimOptions(
         mission=args.mission, out=out, world=args.world, obstacles=args.obstacles, seed=args.seed,
         rulebase=args.rulebase, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
@@ -93,5 +100,5 @@ def run(args: argparse.Namespace) -> int:
             f"{verdict}: {metrics['waypoints_reached']}/{metrics['waypoints_total']} waypoints, "
             f"{metrics['collisions']} collisions, {metrics['path_length_m']} m driven in {metrics['duration_s']} s"
         )
-        console.print(f"report: {out}/ (metrics.json, map.png, motors.png, tracking.png, vehicle.tlog, control.csv)")
+        console.print(f"report: {out}/ (metrics.json, map.png, motors.png, tracking.png, vehicle.tlog, control.csv); {out.parent / 'latest'} points to it")
     return 0 if metrics["success"] else 1

@@ -1,10 +1,13 @@
-"""A minimal pymavlink lockstep controller for ``rover-sitl --lockstep`` (tests and benchmarks).
+"""The lockstep client: a minimal pymavlink controller for ``rover-sitl --lockstep``.
+
+The other half of the emulator's lockstep contract, shared by the tests, the benchmarks and
+``python -m sitl.demo`` (the daemon has its own, ``rover_ctl.mavlink.vehicle``).
 
 It answers the emulator's end-of-frame TIMESYNC markers (docs/architecture.md, "Lockstep
 handshake"), sends a GCS heartbeat every sim second, can arm, and asks a callback each frame for
 the RC override to send::
 
-    client = LockstepClient("tcp:127.0.0.1:5760")
+    client = LockstepClient("tcp:127.0.0.1:5760")   # or sitl.launch.rover_sitl(...).url
     client.arm()
     client.run(10.0, on_frame=lambda t_s, msgs: (1700, 1500))   # (throttle_us, steering_us) or None
     client.close()
@@ -16,26 +19,20 @@ reads a few bytes per system call, too slow for a controller at 20x real time).
 from __future__ import annotations
 
 import os
-import signal
-import socket
-import subprocess
-import sys
-import tempfile
-import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from sitl.mavlink_vehicle import FORCE_ARM_MAGIC  # noqa: E402  (ArduPilot's arm-without-checks param2)
+
 mavlink = mavutil.mavlink
 READ_SIZE_BYTES = 65536
 IGNORE = 65535
 """RC_CHANNELS_OVERRIDE "leave this channel alone" (UINT16_MAX)."""
-FORCE_ARM_MAGIC = 21196
 
 OnFrame = Callable[[float, list], "tuple[int, int] | None"]
 
@@ -166,41 +163,3 @@ class LockstepClient:
 
     def close(self) -> None:
         self.conn.close()
-
-
-@contextmanager
-def sitl_process(*flags: str, start_timeout_s: float = 15.0) -> Iterator[str]:
-    """Run ``python -m sitl --lockstep *flags`` on a free loopback TCP port; yield the client's URL.
-
-    Returns once the emulator printed its ready line; stops it with SIGTERM on exit."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    argv = [sys.executable, "-m", "sitl", "--lockstep", "--endpoint", f"tcpin:127.0.0.1:{port}", *flags]
-    stderr = tempfile.TemporaryFile("w+")  # a file, not a pipe: it can never fill and block the emulator
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=stderr, text=True)
-    try:
-        ready, started = threading.Event(), []
-
-        def drain_stdout() -> None:  # set ``ready`` on the ready line or at exit, then keep draining
-            for line in proc.stdout:
-                if line.startswith("rover-sitl: ready"):
-                    started.append(line)
-                    ready.set()
-            ready.set()
-
-        threading.Thread(target=drain_stdout, daemon=True).start()
-        if not ready.wait(start_timeout_s) or not started:
-            proc.kill()
-            stderr.seek(0)
-            raise LockstepError(f"rover-sitl did not start: exit {proc.wait()}, {stderr.read().strip()}")
-        yield f"tcp:127.0.0.1:{port}"
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(5.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        stderr.close()
