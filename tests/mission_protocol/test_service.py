@@ -186,7 +186,7 @@ def test_tick_re_requests_then_times_out_leaving_the_mission_untouched(svc, rec,
         (0, MissionItem(16, x=-35.0, y=190.0), mav.MAV_MISSION_INVALID_PARAM6_Y),
         (1, MissionItem(16, x=-35.0, y=149.0), mav.MAV_MISSION_UNSUPPORTED),
         (2, MissionItem(5001, x=-35.0, y=149.0), mav.MAV_MISSION_UNSUPPORTED),
-        (0, MissionItem(16, param1=float("inf"), x=-35.0, y=149.0), mav.MAV_MISSION_ERROR),
+        (0, MissionItem(16, param1=float("inf"), x=-35.0, y=149.0), mav.MAV_MISSION_INVALID_PARAM1),
     ],
 )
 def test_an_invalid_item_refuses_the_upload_and_keeps_the_stored_mission(svc, rec, mission, mission_type, item, result):
