@@ -223,6 +223,8 @@ class GcsParams:
     """Upload: cancel after this long without progress (ArduPilot's upload timeout)."""
     mission_max_items: int = 700
     """Largest list (wire items, home included) accepted per mission type."""
+    max_messages_per_poll: int = 100
+    """GCS link: messages read per loop turn at most, so a flood cannot starve the control loop."""
     mission_store_path: str = "~/.local/state/rover-ctl/mission.json"
     """Where the current mission, fence and rally are persisted; empty = not persisted."""
     position_rate_hz: float = 4.0

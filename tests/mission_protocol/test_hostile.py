@@ -98,14 +98,15 @@ def test_a_valid_fence_upload_is_still_accepted(tmp_path):
     assert len(svc.mission.fence) == 5
 
 
-@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
-@pytest.mark.parametrize(
-    "command, slot",
-    [(mav.MAV_CMD_DO_SET_MODE, 1), (mav.MAV_CMD_DO_SET_MISSION_CURRENT, 0), (mav.MAV_CMD_COMPONENT_ARM_DISARM, 0),
-     (mav.MAV_CMD_COMPONENT_ARM_DISARM, 1), (mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0), (mav.MAV_CMD_SET_MESSAGE_INTERVAL, 1),
-     (mav.MAV_CMD_REQUEST_MESSAGE, 0)],
-)
-def test_a_non_finite_or_huge_command_param_is_denied_and_the_link_goes_on(udp_port, command, slot, value):
+NON_FINITE = [math.nan, math.inf, -math.inf]
+SLOTS = [(mav.MAV_CMD_DO_SET_MODE, 1), (mav.MAV_CMD_DO_SET_MISSION_CURRENT, 0), (mav.MAV_CMD_COMPONENT_ARM_DISARM, 0),
+         (mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0), (mav.MAV_CMD_SET_MESSAGE_INTERVAL, 1), (mav.MAV_CMD_REQUEST_MESSAGE, 0)]
+# A NaN force flag (ARM_DISARM param2) is MAVLink's "default", not forced: test_a_nan_force_flag_...
+CASES = [(c, s, v) for c, s in SLOTS for v in NON_FINITE] + [(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, v) for v in NON_FINITE[1:]]
+
+
+@pytest.mark.parametrize("command, slot, value", CASES)
+def test_a_non_finite_command_param_is_denied_and_the_link_goes_on(udp_port, command, slot, value):
     handlers = DefaultHandlers()
     with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=PARAMS, handlers=handlers):
         conn = gcs(udp_port)
@@ -119,3 +120,57 @@ def test_a_non_finite_or_huge_command_param_is_denied_and_the_link_goes_on(udp_p
             assert expect(conn, "COMMAND_ACK", command=command).result == mav.MAV_RESULT_DENIED
         assert not handlers.armed and handlers.custom_mode == RoverMode.HOLD  # nothing took effect
         expect(conn, "HEARTBEAT")  # still alive
+
+
+def test_a_nan_force_flag_arms_without_forcing(udp_port):
+    class Recorder(DefaultHandlers):
+        def arm(self, arm: bool, force: bool) -> int:
+            self.forced = force
+            return super().arm(arm, force)
+
+    handlers = Recorder()
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=PARAMS, handlers=handlers):
+        conn = gcs(udp_port)
+        conn.mav.command_long_send(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, math.nan, 0, 0, 0, 0, 0)
+        assert expect(conn, "COMMAND_ACK", command=mav.MAV_CMD_COMPONENT_ARM_DISARM).result == mav.MAV_RESULT_ACCEPTED
+        assert handlers.armed and handlers.forced is False
+
+
+def test_a_handler_that_raises_is_caught_at_the_link_edge_and_logged_once(udp_port, caplog):
+    class Broken(DefaultHandlers):
+        def return_to_launch(self) -> int:
+            raise ZeroDivisionError("boom")
+
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=PARAMS, handlers=Broken()) as lt:
+        conn = gcs(udp_port)
+        for _ in range(3):
+            conn.mav.command_long_send(1, 1, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0, 0, 0, 0, 0)
+        conn.mav.command_long_send(1, 1, mav.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+        expect(conn, "COMMAND_ACK", command=mav.MAV_CMD_MISSION_START)  # after the three failures
+        expect(conn, "HEARTBEAT")
+        assert lt.link.inbound.failures == {("COMMAND_LONG", "ZeroDivisionError"): 3}
+    logged = [r for r in caplog.records if "ZeroDivisionError" in r.getMessage()]
+    assert len(logged) == 1 and "frame fd" in logged[0].getMessage()
+
+
+def test_messages_for_another_component_and_unknown_modes_are_dropped_and_counted(udp_port):
+    handlers = DefaultHandlers()
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=PARAMS, handlers=handlers) as lt:
+        conn = gcs(udp_port)
+        conn.mav.command_long_send(1, 100, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        conn.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 99)
+        conn.mav.param_set_send(1, 1, b"WP_RADIUS", math.inf, mav.MAV_PARAM_TYPE_REAL32)
+        conn.write(b"\xfd\x09garbage that is no frame")
+        # A partial frame can swallow the bytes of the next datagram (the parser, like ArduPilot's,
+        # is a byte stream): a ground station repeats an unanswered command.
+        for _ in range(3):
+            conn.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, RoverMode.MANUAL, 0, 0, 0, 0, 0)
+            ack = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=1.0)
+            if ack is not None:
+                break
+        assert ack is not None and ack.command == mav.MAV_CMD_DO_SET_MODE and ack.result == mav.MAV_RESULT_ACCEPTED
+        assert not handlers.armed and handlers.custom_mode == RoverMode.MANUAL
+        dropped = lt.link.inbound.dropped
+        assert dropped["command for another component"] == 1
+        assert dropped["SET_MODE to unknown mode 99"] == 1 and dropped["PARAM_SET of a non-finite value"] == 1
+        assert dropped["bad data (CRC, length or unknown message)"] >= 1
