@@ -13,6 +13,7 @@ shares nothing with the daemon but the wire.
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -344,10 +345,10 @@ def _coerce(value: Any, current: Any, where: str) -> Any:
     if isinstance(current, (int, float)) and not isinstance(current, bool):
         try:
             number = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: expected a number, got {value!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise ConfigError(f"{where}: expected a number, got {str(value)[:40]!r}") from None
         if isinstance(current, int) and not isinstance(value, float):
-            if number != int(number):
+            if not math.isfinite(number) or number != int(number):
                 raise ConfigError(f"{where}: expected a whole number, got {value!r}")
             return int(number)
         return number
@@ -385,8 +386,10 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
             data = tomllib.loads(path.read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise ConfigError(f"{path}: no such config file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read: {exc}") from None
+        except (ValueError, RecursionError) as exc:  # TOMLDecodeError, a 5000-digit number, nesting
+            raise ConfigError(f"{path}: invalid TOML: {str(exc).splitlines()[0] or type(exc).__name__}") from None
         _apply(config, data, str(path))
     for item in overrides or []:
         key, sep, value = item.partition("=")

@@ -1,7 +1,8 @@
 """``rover-ctl mission check|upload|download|clear``: mission files and the GCS link.
 
-* ``check FILE``: load and validate; print the summary and warnings. Exit 0 if valid, 2 with
-  every error (one per line) if not.
+* ``check FILE [--all]``: load and validate; print the summary and warnings. Exit 0 if valid, 2
+  if not, with the first error and the count of the others on one line (``--all``: every error,
+  one per line). Whatever the file holds, that is the outcome: never a traceback.
 * ``upload FILE --connect URL``: send each non-empty part of the file (mission items with home at
   seq 0, fence, rally points) to the autopilot over the mission protocol.
 * ``download OUT --connect URL``: fetch mission, fence and rally; the format follows OUT's
@@ -33,6 +34,7 @@ def add_parser(subparsers) -> None:
 
     check = sub.add_parser("check", help="validate a mission file and print its summary")
     check.add_argument("file", help=".waypoints / .txt (QGC WPL 110) or .plan (QGroundControl)")
+    check.add_argument("--all", action="store_true", help="list every error, not only the first")
     check.set_defaults(func=cmd_check)
 
     def link_options(p: argparse.ArgumentParser) -> None:
@@ -60,19 +62,23 @@ def add_parser(subparsers) -> None:
     clear.set_defaults(func=cmd_clear)
 
 
-def _load(path: str):
+def _load(path: str, every_error: bool = False):
     from rover_ctl.mission.files import MissionFileError, load_mission
 
     try:
         return load_mission(path)
     except MissionFileError as exc:
-        raise UserError("\n".join(exc.errors)) from None
+        first, rest = exc.errors[0], exc.errors[1:]
+        if every_error or not rest:
+            raise UserError("\n".join(exc.errors)) from None
+        more = f"{len(rest)} more error{'s' if len(rest) > 1 else ''}"
+        raise UserError(f"{first} (and {more}; 'rover-ctl mission check --all' lists them)") from None
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     from rover_ctl.mission.files import summarize
 
-    loaded = _load(args.file)
+    loaded = _load(args.file, args.all)
     print(f"{args.file}: valid {loaded.format} mission")
     print(summarize(loaded.mission))
     for warning in loaded.warnings:
