@@ -218,10 +218,12 @@ class GcsParams:
     component_id: int = 1
     """MAV_COMP_ID_AUTOPILOT1."""
     heartbeat_period_s: float = 1.0
-    mission_item_retry_s: float = 0.5
-    """Upload: re-request the expected item after this long without it."""
-    mission_upload_timeout_s: float = 8.0
-    """Upload: cancel after this long without progress (ArduPilot's upload timeout)."""
+    mission_item_retry_s: float = 0.25
+    """Upload: re-request the expected item after this long without it (the mission protocol's
+    item timeout, mavlink.io services/mission "Timeouts and Retries")."""
+    mission_upload_timeout_s: float = 1.5
+    """Upload: cancel after this long without progress: 5 re-requests after the first (the
+    protocol's default timeout, 1500 ms)."""
     mission_max_items: int = 700
     """Largest list (wire items, home included) accepted per mission type."""
     max_messages_per_poll: int = 100
@@ -234,10 +236,14 @@ class GcsParams:
     attitude_rate_hz: float = 10.0
     sys_status_rate_hz: float = 1.0
     mission_current_rate_hz: float = 1.0
-    client_retry_s: float = 0.5
-    """`rover-ctl mission` client: resend a request after this long without an answer."""
-    client_retries: int = 10
-    """Client: resends of one request before giving up with a timeout error."""
+    client_retry_s: float = 1.5
+    """`rover-ctl mission` client: resend MISSION_COUNT, REQUEST_LIST or CLEAR_ALL after this long
+    without an answer (the mission protocol's default timeout)."""
+    client_item_retry_s: float = 0.25
+    """Client: resend an item (upload) or an item request (download) after this long without an
+    answer (the protocol's item timeout)."""
+    client_retries: int = 5
+    """Client: resends of one message before giving up with a timeout error (the protocol's 5)."""
     client_connect_timeout_s: float = 5.0
     """Client: wait this long for the autopilot's HEARTBEAT."""
 

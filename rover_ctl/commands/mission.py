@@ -43,7 +43,8 @@ def add_parser(subparsers) -> None:
         p.add_argument("--source-system", type=int, default=255, metavar="ID", help="our MAVLink system id (255)")
         p.add_argument("--source-component", type=int, default=190, metavar="ID", help="our component id (190)")
         p.add_argument("--timeout", type=float, default=None, metavar="S",
-                       help="give up after this long without an answer (default 5 s)")  # fmt: skip
+                       help="give up after this long without an answer (default: 5 s to connect, then the "
+                            "mission protocol's 1.5 s per request, 0.25 s per item, 5 retries)")  # fmt: skip
         p.add_argument("--quiet", action="store_true", help="no progress display")
 
     upload = sub.add_parser("upload", help="upload a mission file (mission, fence, rally) to the autopilot")
@@ -94,7 +95,8 @@ def _client(args: argparse.Namespace):
         if args.timeout <= 0:
             raise UserError(f"--timeout {args.timeout:g}: must be positive")
         params.client_connect_timeout_s = args.timeout
-        params.client_retries = max(1, round(args.timeout / params.client_retry_s) - 1)
+        params.client_retry_s = args.timeout / (params.client_retries + 1)
+        params.client_item_retry_s = min(params.client_item_retry_s, params.client_retry_s)
     try:
         return MissionClient(args.connect, params, args.source_system, args.source_component)
     except (OSError, ValueError) as exc:

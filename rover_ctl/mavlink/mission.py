@@ -211,12 +211,15 @@ class _Upload:
 
 @dataclass
 class _Completed:
-    """The last finished upload, to repeat its ACK if the sender did not get it."""
+    """The last finished upload, to repeat its ACK if the sender did not get it: only to the same
+    last item (seq and content) and only until another transfer starts, so that the resent last
+    item of a later upload that was cancelled can never collect this one's ACK."""
 
     sender: Sender
     mission_type: int
     count: int
     result: int
+    last: MissionItem | None
 
 
 class MissionService:
@@ -291,6 +294,7 @@ class MissionService:
             return []
         if now_s - up.last_progress_s >= self.params.mission_upload_timeout_s:
             self._upload = None
+            self._completed = None
             return [self._ack(up.sender, mav.MAV_MISSION_OPERATION_CANCELLED, up.mission_type)]
         if now_s - up.last_request_s >= self.params.mission_item_retry_s:
             return [self._request(up, now_s)]
@@ -332,6 +336,7 @@ class MissionService:
         if self._busy_for(sender):
             return [self._ack(sender, mav.MAV_MISSION_DENIED, mission_type)]
         self._upload = None  # a repeated COUNT from the uploader restarts
+        self._completed = None
         if not is_list_type(mission_type):
             return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, mission_type)]
         if msg.count > self.params.mission_max_items:
@@ -345,7 +350,10 @@ class MissionService:
         up = self._upload
         if up is None:
             done = self._completed
-            if done and done.sender == sender and done.mission_type == msg.mission_type and msg.seq == done.count - 1:
+            if (
+                done and done.sender == sender and done.mission_type == msg.mission_type and msg.seq == done.count - 1
+                and done.last is not None and item_from_message(msg).same_as(done.last)
+            ):  # fmt: skip
                 return [self._ack(sender, done.result, done.mission_type)]
             return []
         if up.sender != sender:
@@ -375,7 +383,7 @@ class MissionService:
         result = check_list(new, mission_type)
         if result == mav.MAV_MISSION_ACCEPTED:
             result = self._store(new, mission_type)
-        self._completed = _Completed(sender, mission_type, count, result)
+        self._completed = _Completed(sender, mission_type, count, result, wire[-1] if wire else None)
         return self._ack(sender, result, mission_type)
 
     def _store(self, new: Mission, mission_type: int) -> int:
