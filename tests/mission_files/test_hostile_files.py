@@ -35,3 +35,14 @@ def test_a_mutated_file_is_a_one_line_error_with_exit_2(tmp_path, capsys, name, 
     err = capsys.readouterr().err
     assert err.startswith(f"rover-ctl: error: {path}") and first_error in err.splitlines()[0]
     assert "Traceback" not in err
+
+
+def test_check_gives_the_first_error_and_counts_the_rest_or_lists_all(tmp_path, capsys):
+    path = tmp_path / "three_bad.waypoints"
+    rows = [f"{seq}\t0\t3\t16\t0\t0\t0\t0\t95.0\t149.1\t0\t1\n" for seq in (1, 2, 3)]
+    path.write_text("QGC WPL 110\n" + WPL_HOME + "".join(rows))
+    assert main(["mission", "check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}:3: latitude 95 out of range" in err and "(and 2 more errors;" in err
+    assert main(["mission", "check", "--all", str(path)]) == 2
+    assert capsys.readouterr().err.count("latitude 95 out of range") == 3
