@@ -148,7 +148,7 @@ class GcsLink:
             autoreconnect=True,
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
-        self.inbound = Inbound(self.params)
+        self.inbound = Inbound(self.params, self.conn)
         mission = self._load_store()
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
         self.telemetry = Telemetry(self.conn, self.params)
@@ -167,7 +167,12 @@ class GcsLink:
         state = self.handlers.state()
         self.service.vehicle_home = state.home
         for _ in range(self.params.max_messages_per_poll):  # a flood must not starve the control loop
-            if (msg := self.conn.recv_msg()) is None:
+            try:
+                msg = self.conn.recv_msg()
+            except OSError as exc:  # a socket error (ICMP-reported, reset): the next turn tries again
+                log.debug("GCS link receive: %s", exc)
+                break
+            if msg is None:
                 break
             self._dispatch(msg, now_s)
         self._send_all(self.service.tick(now_s))

@@ -15,6 +15,11 @@ looks at every field a microservice reads and returns a ``Verdict``:
 ``Inbound.failed(msg, exc)`` is the link edge's last resort: a handler that raised anyway is logged
 once per (message type, exception type) with the frame in hex, counted, and the link goes on.
 
+On a UDP link each datagram is parsed on its own (``Inbound(params, conn)`` wraps ``conn.recv``):
+pymavlink's parser is a byte stream, so the unfinished frame a stray datagram leaves (any 0xFD or
+0xFE byte starts one) would swallow the bytes of the next datagram -- of any sender, and after one
+random datagram in two. A frame never spans datagrams, so what one leaves unparsed is dropped.
+
 Which params each command reads follows ``rover_ctl.mavlink.commands``; a command it does not
 handle is passed through (it answers MAV_RESULT_UNSUPPORTED without reading a param).
 """
@@ -26,6 +31,8 @@ import math
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any, Callable
+
+from pymavlink import mavutil
 
 from rover_ctl.config import GcsParams
 from rover_ctl.vocabulary import mav
@@ -41,6 +48,7 @@ ROVER_MODES = frozenset(value for value, entry in mav.enums["ROVER_MODE"].items(
 ARM_VALUES = (0.0, 1.0)
 """ARM_DISARM param1: 0 disarm, 1 arm; anything else is not a request to do either."""
 COMMANDS = ("COMMAND_LONG", "COMMAND_INT")
+UNFINISHED = "unfinished frame at the end of a datagram"
 
 
 @dataclass(frozen=True)
@@ -77,10 +85,13 @@ PARAM_RULES: dict[int, tuple[Rule, ...]] = {
 
 
 class Inbound:
-    """Checks messages for one GCS link (``params``: our system and component ids)."""
+    """Checks messages for one GCS link (``params``: our system and component ids; ``conn``: its
+    pymavlink connection, parsed a datagram at a time when it is UDP)."""
 
-    def __init__(self, params: GcsParams) -> None:
+    def __init__(self, params: GcsParams, conn: Any = None) -> None:
         self.params = params
+        if isinstance(conn, mavutil.mavudp):
+            conn.recv = DatagramFraming(conn.recv, conn.mav, lambda: self._drop(UNFINISHED))
         self.dropped: Counter[str] = Counter()
         """Messages dropped without an answer, by reason."""
         self.refused = 0
@@ -136,3 +147,30 @@ class Inbound:
             frame = bytes(msg.get_msgbuf() or b"").hex()
             log.error("GCS link: %s raised %s: %s (frame %s); ignored, the link goes on", key[0], key[1], exc, frame,
                       exc_info=exc)  # fmt: skip
+
+
+class DatagramFraming:
+    """``conn.recv`` of a UDP connection, such that no frame is parsed across two datagrams.
+
+    Before a new datagram is read, whatever the parser still holds from the last one is offered to
+    it once more (returning no new bytes: a datagram may carry several frames); if that yields
+    nothing, it is an unfinished frame and is dropped."""
+
+    def __init__(self, recv: Callable[..., Any], parser: Any, dropped: Callable[[], Any]) -> None:
+        self._recv = recv
+        self._parser = parser
+        self._dropped = dropped
+        self._offered: int | None = None
+
+    def __call__(self, n: int | None = None):
+        left = self._parser.buf_len()
+        if left and left != self._offered:
+            self._offered = left
+            return b""
+        if left:
+            self._parser.buf = bytearray()
+            self._parser.buf_index = 0
+            self._parser.expected_length = mav.HEADER_LEN_V1 + 2
+            self._dropped()
+        self._offered = None
+        return self._recv(n)
