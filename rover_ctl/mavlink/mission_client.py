@@ -6,7 +6,8 @@ points of that autopilot, one mission type at a time:
 
 * upload: MISSION_COUNT, then answer every MISSION_REQUEST_INT / MISSION_REQUEST with the item
   asked for (so a lost item is simply asked for again), until MISSION_ACK. The final ACK counts
-  only once the last item has been sent (a stale ACK cannot end an upload early).
+  only once every item has been sent in this transfer (a stale ACK, or a late request of an
+  earlier upload, cannot end an upload early).
 * download: MISSION_REQUEST_LIST -> MISSION_COUNT, MISSION_REQUEST_INT for each seq -> item,
   then MISSION_ACK.
 * clear: MISSION_CLEAR_ALL -> MISSION_ACK.
@@ -119,6 +120,7 @@ class MissionClient:
         what = f"{TYPE_NAMES[mission_type]} upload"
         last = mav.MAVLink_mission_count_message(*target, len(items), mission_type)
         self.conn.mav.send(last)
+        sent: set[int] = set()
         last_sent = False
         retry_s = self.params.client_retry_s
         while True:
@@ -142,7 +144,10 @@ class MissionClient:
             last = item_message(items[msg.seq], msg.seq, mission_type, target)
             self.conn.mav.send(last)
             retry_s = self.params.client_item_retry_s
-            last_sent = last_sent or msg.seq == len(items) - 1
+            # The vehicle asks in order, so its ACK can only be this transfer's once every item went
+            # out in it: a late request of an earlier upload must not make a stale ACK count.
+            sent.add(msg.seq)
+            last_sent = len(sent) == len(items)
             if progress:
                 progress(mission_type, msg.seq + 1, len(items))
 

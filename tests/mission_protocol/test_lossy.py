@@ -215,3 +215,24 @@ def test_30_uploads_of_60_items_through_loss_duplication_and_reordering_are_neve
     print(f"30 uploads of 60 items: {outcomes}; proxy {proxy.stats}")
     assert outcomes["stored"] >= 20, (outcomes, proxy.stats)  # the retries do carry most uploads through
     assert min(proxy.stats["dropped"], proxy.stats["duplicated"], proxy.stats["reordered"]) > 100, proxy.stats
+
+
+def test_a_late_request_and_ack_of_the_previous_upload_do_not_end_the_next_one(udp_port):
+    """The race the lossy run found: the previous upload's last request (held back by the network)
+    and its repeated ACK reach the client at the start of the next upload."""
+    vehicle = gcs(udp_port, (1, 1))  # plays the vehicle on a udpout socket; the client listens
+    new = sixty_items(1)
+    with MissionClient(f"udpin:127.0.0.1:{udp_port}", SCALED_CLIENT) as client:
+        client.target = (1, 1)
+        vehicle.mav.heartbeat_send(mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)
+        client.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=2)
+        last = len(wire_items(new, MissionType.MISSION)) - 1
+        vehicle.mav.mission_request_int_send(255, 190, last, 0)  # the earlier upload's last request
+        vehicle.mav.mission_ack_send(255, 190, mav.MAV_MISSION_ACCEPTED, 0)  # its repeated ACK
+        try:
+            client.upload_items(MissionType.MISSION, wire_items(new, MissionType.MISSION))
+            ended = "acknowledged"
+        except MissionClientError:
+            ended = "timed out"
+    vehicle.close()
+    assert ended == "timed out"  # this vehicle never asked for items 0..58: nothing was stored
