@@ -13,6 +13,7 @@ shares nothing with the daemon but the wire.
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -217,12 +218,16 @@ class GcsParams:
     component_id: int = 1
     """MAV_COMP_ID_AUTOPILOT1."""
     heartbeat_period_s: float = 1.0
-    mission_item_retry_s: float = 0.5
-    """Upload: re-request the expected item after this long without it."""
-    mission_upload_timeout_s: float = 8.0
-    """Upload: cancel after this long without progress (ArduPilot's upload timeout)."""
+    mission_item_retry_s: float = 0.25
+    """Upload: re-request the expected item after this long without it (the mission protocol's
+    item timeout, mavlink.io services/mission "Timeouts and Retries")."""
+    mission_upload_timeout_s: float = 1.5
+    """Upload: cancel after this long without progress: 5 re-requests after the first (the
+    protocol's default timeout, 1500 ms)."""
     mission_max_items: int = 700
     """Largest list (wire items, home included) accepted per mission type."""
+    max_messages_per_poll: int = 100
+    """GCS link: messages read per loop turn at most, so a flood cannot starve the control loop."""
     mission_store_path: str = "~/.local/state/rover-ctl/mission.json"
     """Where the current mission, fence and rally are persisted; empty = not persisted."""
     position_rate_hz: float = 4.0
@@ -231,10 +236,14 @@ class GcsParams:
     attitude_rate_hz: float = 10.0
     sys_status_rate_hz: float = 1.0
     mission_current_rate_hz: float = 1.0
-    client_retry_s: float = 0.5
-    """`rover-ctl mission` client: resend a request after this long without an answer."""
-    client_retries: int = 10
-    """Client: resends of one request before giving up with a timeout error."""
+    client_retry_s: float = 1.5
+    """`rover-ctl mission` client: resend MISSION_COUNT, REQUEST_LIST or CLEAR_ALL after this long
+    without an answer (the mission protocol's default timeout)."""
+    client_item_retry_s: float = 0.25
+    """Client: resend an item (upload) or an item request (download) after this long without an
+    answer (the protocol's item timeout)."""
+    client_retries: int = 5
+    """Client: resends of one message before giving up with a timeout error (the protocol's 5)."""
     client_connect_timeout_s: float = 5.0
     """Client: wait this long for the autopilot's HEARTBEAT."""
 
@@ -363,10 +372,10 @@ def _coerce(value: Any, current: Any, where: str) -> Any:
     if isinstance(current, (int, float)) and not isinstance(current, bool):
         try:
             number = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: expected a number, got {value!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise ConfigError(f"{where}: expected a number, got {str(value)[:40]!r}") from None
         if isinstance(current, int) and not isinstance(value, float):
-            if number != int(number):
+            if not math.isfinite(number) or number != int(number):
                 raise ConfigError(f"{where}: expected a whole number, got {value!r}")
             return int(number)
         return number
@@ -404,8 +413,10 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
             data = tomllib.loads(path.read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise ConfigError(f"{path}: no such config file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read: {exc}") from None
+        except (ValueError, RecursionError) as exc:  # TOMLDecodeError, a 5000-digit number, nesting
+            raise ConfigError(f"{path}: invalid TOML: {str(exc).splitlines()[0] or type(exc).__name__}") from None
         _apply(config, data, str(path))
     for item in overrides or []:
         key, sep, value = item.partition("=")

@@ -43,7 +43,7 @@ from rover_ctl.estimation.readings import RangeReading, WheelDistance
 from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.navigation.navigator import Navigator
-from rover_ctl.navigation.planner import Fence, FenceError, PathFollower, Planner
+from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
@@ -480,11 +480,12 @@ class Autopilot:
         to_enu = self.frame.to_enu
         self.fence, self.fence_error = Fence(), None
         if self.mission.fence:
-            try:
-                self.fence = Fence.from_items(self.mission.fence, to_enu)
-            except FenceError as exc:  # the store held a fence the planner cannot use: refuse to arm
-                self.fence_error = str(exc)
-                self._say(f"Fence ignored: {exc}", Severity.WARNING)
+            # A stored fence with invalid parts (an older version's store) never stops the rover
+            # starting: the valid parts are kept, and arming is refused while the fence is not whole.
+            self.fence, ignored = Fence.checked(self.mission.fence, to_enu)
+            if ignored:
+                self.fence_error = ignored[0] + (f" (and {len(ignored) - 1} more)" if len(ignored) > 1 else "")
+                self._say(f"Fence part ignored: {self.fence_error}", Severity.WARNING)
         self.planner = Planner(cfg.planner, cfg.robot, fence=self.fence)
         self.follower = PathFollower(self.planner, cfg.planner)
         self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, cfg.robot.max_speed_mps)

@@ -1,7 +1,8 @@
 """``rover-ctl mission check|upload|download|clear``: mission files and the GCS link.
 
-* ``check FILE``: load and validate; print the summary and warnings. Exit 0 if valid, 2 with
-  every error (one per line) if not.
+* ``check FILE [--all]``: load and validate; print the summary and warnings. Exit 0 if valid, 2
+  if not, with the first error and the count of the others on one line (``--all``: every error,
+  one per line). Whatever the file holds, that is the outcome: never a traceback.
 * ``upload FILE --connect URL``: send each non-empty part of the file (mission items with home at
   seq 0, fence, rally points) to the autopilot over the mission protocol.
 * ``download OUT --connect URL``: fetch mission, fence and rally; the format follows OUT's
@@ -46,6 +47,7 @@ def add_parser(subparsers) -> None:
 
     check = sub.add_parser("check", help="validate a mission file and print its summary")
     check.add_argument("file", help=".waypoints / .txt (QGC WPL 110) or .plan (QGroundControl)")
+    check.add_argument("--all", action="store_true", help="list every error, not only the first")
     check.set_defaults(func=cmd_check)
 
     upload = sub.add_parser("upload", help="upload a mission file (mission, fence, rally) to the autopilot")
@@ -68,19 +70,23 @@ def add_parser(subparsers) -> None:
     start.set_defaults(func=cmd_start)
 
 
-def _load(path: str):
+def _load(path: str, every_error: bool = False):
     from rover_ctl.mission.files import MissionFileError, load_mission
 
     try:
         return load_mission(path)
     except MissionFileError as exc:
-        raise UserError("\n".join(exc.errors)) from None
+        first, rest = exc.errors[0], exc.errors[1:]
+        if every_error or not rest:
+            raise UserError("\n".join(exc.errors)) from None
+        more = f"{len(rest)} more error{'s' if len(rest) > 1 else ''}"
+        raise UserError(f"{first} (and {more}; 'rover-ctl mission check --all' lists them)") from None
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     from rover_ctl.mission.files import summarize
 
-    loaded = _load(args.file)
+    loaded = _load(args.file, args.all)
     print(f"{args.file}: valid {loaded.format} mission")
     print(summarize(loaded.mission))
     for warning in loaded.warnings:
@@ -96,7 +102,8 @@ def _client(args: argparse.Namespace):
         if args.timeout <= 0:
             raise UserError(f"--timeout {args.timeout:g}: must be positive")
         params.client_connect_timeout_s = args.timeout
-        params.client_retries = max(1, round(args.timeout / params.client_retry_s) - 1)
+        params.client_retry_s = args.timeout / (params.client_retries + 1)
+        params.client_item_retry_s = min(params.client_item_retry_s, params.client_retry_s)
     try:
         return MissionClient(args.connect, params, args.source_system, args.source_component)
     except (OSError, ValueError) as exc:

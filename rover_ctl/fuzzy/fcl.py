@@ -64,6 +64,8 @@ def parse_fcl(text: str, where: str) -> dict[str, Any]:
         elif head in ("END_VAR", "END_FUZZIFY", "END_DEFUZZIFY", "END_RULEBLOCK", "END_FUNCTION_BLOCK"):
             block = None
         elif head in ("FUZZIFY", "DEFUZZIFY"):
+            if len(line.split()) < 2:
+                raise RuleBaseError(f"{here}: {head} needs the name of a variable")
             name = line.split()[1]
             table = data["inputs" if head == "FUZZIFY" else "outputs"]
             if name not in table:
@@ -85,8 +87,8 @@ def parse_fcl(text: str, where: str) -> dict[str, Any]:
             raise RuleBaseError(f"{here}: unexpected {raw.strip()!r}")
     for kind in ("inputs", "outputs"):
         for name, spec in data[kind].items():
-            if "range" not in spec and spec["sets"]:
-                finite = [p for points in spec["sets"].values() for p in points if math.isfinite(p)]
+            finite = [p for points in spec["sets"].values() for p in points if math.isfinite(p)]
+            if "range" not in spec and finite:
                 spec["range"] = [min(finite), max(finite)]
     return data
 

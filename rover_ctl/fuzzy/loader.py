@@ -19,6 +19,9 @@ from rover_ctl.fuzzy.membership import FuzzySet, Variable
 from rover_ctl.fuzzy.rulebase import Rule, RuleBase, RuleBaseError
 
 SHIPPED_DIR = Path(__file__).resolve().parent / "rulebases"
+MIN_RESOLUTION = 11
+MAX_RESOLUTION = 1_000_001
+"""Samples of the sampled defuzzifiers: beyond this a rule base would only cost memory and time."""
 TOP_KEYS = {"name", "description", "and", "defuzzifier", "resolution", "inputs", "outputs", "rules"}
 VARIABLE_KEYS = {"unit", "range", "period", "default", "sets", "description"}
 CLAUSE = re.compile(r"^\s*(\w+)\s+is\s+(\w+)\s*$")
@@ -50,8 +53,8 @@ def load_rulebase(name_or_path: str | Path) -> RuleBase:
         return parse_rulebase(parse_fcl(text, path.name), path.name)
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RuleBaseError(f"{path}: invalid TOML: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # TOMLDecodeError, a 5000-digit number, nesting
+        raise RuleBaseError(f"{path}: invalid TOML: {str(exc).splitlines()[0] or type(exc).__name__}") from None
     return parse_rulebase(data, path.name)
 
 
@@ -71,8 +74,10 @@ def parse_rulebase(data: dict[str, Any], where: str) -> RuleBase:
         _rule(text, inputs, outputs, f"{where} rule {n}") for n, text in enumerate(rules_table["list"], start=1)
     )
     resolution = data.get("resolution", 1001)
-    if not isinstance(resolution, int) or resolution < 11:
-        raise RuleBaseError(f"{where}: resolution must be a whole number >= 11, got {resolution!r}")
+    if not isinstance(resolution, int) or not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
+        raise RuleBaseError(
+            f"{where}: resolution must be a whole number {MIN_RESOLUTION}-{MAX_RESOLUTION}, got {str(resolution)[:40]}"
+        )
     return RuleBase(
         name=str(data.get("name", where)),
         description=str(data.get("description", "")),
@@ -93,7 +98,9 @@ def _no_unknown(table: dict[str, Any], known: set[str], where: str) -> None:
 
 
 def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (isinstance(value, int) and abs(value) > 2**1023):
+        raise RuleBaseError(f"{where}: expected a number, got {str(value)[:40]!r}")
+    if math.isnan(value):
         raise RuleBaseError(f"{where}: expected a number, got {value!r}")
     return float(value)
 

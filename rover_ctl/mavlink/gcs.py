@@ -52,6 +52,7 @@ from pymavlink import mavutil
 from rover_ctl.config import Config, GcsParams
 from rover_ctl.mavlink import commands, params
 from rover_ctl.mavlink.commands import CommandService
+from rover_ctl.mavlink.inbound import Inbound
 from rover_ctl.mavlink.mission import MissionService, item_from_message
 from rover_ctl.mavlink.params import ConfigParams, ParamService
 from rover_ctl.mavlink.telemetry import Telemetry
@@ -178,6 +179,7 @@ class GcsLink:
             autoreconnect=True,
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        self.inbound = Inbound(self.params, self.conn)
         mission = self._load_store()
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
         self.telemetry = Telemetry(self.conn, self.params)
@@ -196,9 +198,15 @@ class GcsLink:
         state = self.handlers.state()
         self.service.vehicle_home = state.home
         self.service.mission_state = state.mission_state
-        while (msg := self.conn.recv_msg()) is not None:
-            if msg.get_type() != "BAD_DATA":
-                self._dispatch(msg, now_s)
+        for _ in range(self.params.max_messages_per_poll):  # a flood must not starve the control loop
+            try:
+                msg = self.conn.recv_msg()
+            except OSError as exc:  # a socket error (ICMP-reported, reset): the next turn tries again
+                log.debug("GCS link receive: %s", exc)
+                break
+            if msg is None:
+                break
+            self._dispatch(msg, now_s)
         self._send_all(self.service.tick(now_s))
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = now_s + self.params.heartbeat_period_s
@@ -207,6 +215,19 @@ class GcsLink:
             self.conn.mav.send(self.service.mission_current())
 
     def _dispatch(self, msg, now_s: float) -> None:
+        """Check ``msg`` at the gate (``rover_ctl.mavlink.inbound``), then hand it to its
+        microservice; a handler that raises anyway is logged and counted there, and the link goes on."""
+        verdict = self.inbound.check(msg)
+        if not verdict.ok:
+            if verdict.reply is not None:
+                self.conn.mav.send(verdict.reply)
+            return
+        try:
+            self._route(msg, now_s)
+        except Exception as exc:  # the link edge: one bad message never stops the daemon
+            self.inbound.failed(msg, exc)
+
+    def _route(self, msg, now_s: float) -> None:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
             if msg.type == mav.MAV_TYPE_GCS:

@@ -19,12 +19,22 @@ Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemPro
   ``mission_item_retry_s`` without an answer; after ``mission_upload_timeout_s`` without progress
   the upload is cancelled (MAV_MISSION_OPERATION_CANCELLED) and the stored mission is untouched.
   If the final ACK is lost and the sender repeats the last item, the ACK is repeated.
+* Validation at the boundary: each item is checked as it arrives with the item rules of
+  ``rover_ctl.mission.validate`` (``check_item``), and the complete list with all of them
+  (``validate``: DO_JUMP targets, polygon vertex counts and self-intersection, at most one return
+  point), the same rules as ``rover-ctl mission check``. The first problem refuses the upload with
+  the MAV_MISSION_RESULT of the field it is about (``RESULT_BY_FIELD``: a bad radius or vertex
+  count is INVALID_PARAM1, a latitude INVALID_PARAM5_X, a frame UNSUPPORTED_FRAME, a command of
+  another list UNSUPPORTED, ...).
 * Atomicity: received items go to a scratch list. Only a complete, valid upload is passed to
   ``commit(new_mission, mission_type)`` (the shell persists it there); if ``commit`` raises, the upload is
   refused with MAV_MISSION_ERROR and the stored mission stays the old one.
 * Download: MISSION_REQUEST_LIST -> MISSION_COUNT; every MISSION_REQUEST_INT or legacy
   MISSION_REQUEST in range is answered with MISSION_ITEM_INT (stateless, so lost requests are
-  simply repeated by the client); out of range gets MAV_MISSION_INVALID_SEQUENCE.
+  simply repeated by the client); out of range gets MAV_MISSION_INVALID_SEQUENCE. A mission type
+  other than MISSION, FENCE or RALLY (ALL, 255, only makes sense for a clear) gets
+  MAV_MISSION_UNSUPPORTED. A stored value MISSION_ITEM_INT cannot carry (a plan stored by an older
+  version) is sent as 0 (NaN x/y) or clamped, never a failure to pack.
 * MISSION_CLEAR_ALL (one type or MAV_MISSION_TYPE_ALL) commits an emptied mission and ACKs.
 * MISSION_SET_CURRENT asks ``set_current(seq) -> bool`` (the executor) and answers
   MISSION_CURRENT, or a STATUSTEXT warning when refused. ``mission_current`` and
@@ -43,28 +53,51 @@ from typing import Callable
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.config import GcsParams
-from rover_ctl.mission.model import FRAME_GLOBAL, GLOBAL_FRAMES, Home, Mission, MissionItem, MissionType
+from rover_ctl.mission.model import FRAME_GLOBAL, Home, Mission, MissionItem, MissionType, xy_scale
+from rover_ctl.mission.validate import FLOAT32_MAX, INT32_MAX, check_item as item_problems, validate
+from rover_ctl.vocabulary import Cmd
 
-MAV_CMD_NAV_WAYPOINT = 16
-MISSION_TYPE_ALL = 255
-MAV_COMP_ID_MISSIONPLANNER = 190
+MISSION_TYPE_ALL = mav.MAV_MISSION_TYPE_ALL
+MAV_COMP_ID_MISSIONPLANNER = mav.MAV_COMP_ID_MISSIONPLANNER
 """Older ground stations address mission messages to this component; accepted as ours."""
-LOCAL_FRAMES = frozenset({1, 4, 7, 8, 9, 20, 21})
-"""MAV_FRAME_LOCAL_NED/ENU and body/offset variants: x/y are metres * 1e4 in MISSION_ITEM_INT."""
-FENCE_COMMANDS = frozenset(range(5000, 5005))
-RALLY_COMMANDS = frozenset({5100})
+RESULT_BY_FIELD = {
+    "command": mav.MAV_MISSION_UNSUPPORTED,
+    "frame": mav.MAV_MISSION_UNSUPPORTED_FRAME,
+    "param1": mav.MAV_MISSION_INVALID_PARAM1,
+    "param2": mav.MAV_MISSION_INVALID_PARAM2,
+    "param3": mav.MAV_MISSION_INVALID_PARAM3,
+    "param4": mav.MAV_MISSION_INVALID_PARAM4,
+    "x": mav.MAV_MISSION_INVALID_PARAM5_X,
+    "y": mav.MAV_MISSION_INVALID_PARAM6_Y,
+    "z": mav.MAV_MISSION_INVALID_PARAM7,
+}
+"""MAV_MISSION_RESULT of a refused upload, by the item field its first problem is about (else
+MAV_MISSION_INVALID)."""
 
 Sender = tuple[int, int]
 
 
+def _int32(value: float) -> int:
+    """A scaled coordinate as MISSION_ITEM_INT's int32: NaN (unused) is 0, beyond int32 clamped
+    (validation refuses such values; a plan stored by an older version may still hold them)."""
+    if math.isnan(value):
+        return 0
+    return int(max(-INT32_MAX, min(INT32_MAX, round(value) if math.isfinite(value) else value)))
+
+
+def _float32(value: float) -> float:
+    """A param as float32 can carry it: beyond float32 becomes +-inf (NaN stays NaN)."""
+    return value if math.isnan(value) or abs(value) <= FLOAT32_MAX else math.copysign(math.inf, value)
+
+
 def encode_xy(item: MissionItem) -> tuple[int, int]:
     """Model x/y -> MISSION_ITEM_INT x/y integers (deg*1e7, m*1e4 or raw)."""
-    scale = 1e7 if item.frame in GLOBAL_FRAMES else 1e4 if item.frame in LOCAL_FRAMES else 1.0
-    return round(item.x * scale), round(item.y * scale)
+    scale = xy_scale(item.frame)
+    return _int32(item.x * scale), _int32(item.y * scale)
 
 
 def decode_xy(frame: int, x: int, y: int) -> tuple[float, float]:
-    scale = 1e7 if frame in GLOBAL_FRAMES else 1e4 if frame in LOCAL_FRAMES else 1.0
+    scale = xy_scale(frame)
     return x / scale, y / scale
 
 
@@ -91,47 +124,61 @@ def item_from_message(msg) -> MissionItem:
 def item_message(item: MissionItem, seq: int, mission_type: int, target: Sender, current: bool = False):
     """MissionItem -> MISSION_ITEM_INT addressed to ``target``."""
     x, y = encode_xy(item)
+    params = (_float32(p) for p in (item.param1, item.param2, item.param3, item.param4))
     return mav.MAVLink_mission_item_int_message(
-        target[0], target[1], seq, item.frame, item.command, int(current), int(item.autocontinue),
-        item.param1, item.param2, item.param3, item.param4, x, y, item.z, mission_type,
+        target[0], target[1], seq, int(item.frame) & 0xFF, int(item.command) & 0xFFFF, int(current),
+        int(item.autocontinue), *params, x, y, _float32(item.z), mission_type,
     )  # fmt: skip
 
 
 def home_item(home: Home | None) -> MissionItem:
     """Seq 0 of a MISSION-type list as ArduPilot sends it (a NAV_WAYPOINT at home, frame GLOBAL)."""
     if home is None:
-        return MissionItem(command=MAV_CMD_NAV_WAYPOINT, frame=FRAME_GLOBAL)
-    return MissionItem(command=MAV_CMD_NAV_WAYPOINT, frame=FRAME_GLOBAL, x=home.lat_deg, y=home.lon_deg, z=home.alt_m)
+        return MissionItem(command=Cmd.NAV_WAYPOINT, frame=FRAME_GLOBAL)
+    return MissionItem(command=Cmd.NAV_WAYPOINT, frame=FRAME_GLOBAL, x=home.lat_deg, y=home.lon_deg, z=home.alt_m)
 
 
 def home_from_item(item: MissionItem) -> Home | None:
-    if not item.is_global or (item.x == 0.0 and item.y == 0.0):
+    if not item.is_global or (item.x == 0.0 and item.y == 0.0) or math.isnan(item.x) or math.isnan(item.y):
         return None
     return Home(item.x, item.y, item.z)
 
 
+def is_list_type(mission_type: int) -> bool:
+    """MISSION, FENCE or RALLY: a list that can be uploaded and downloaded (not ALL, not unknown)."""
+    return mission_type in MissionType.__members__.values()
+
+
 def wire_items(mission: Mission, mission_type: int, vehicle_home: Home | None = None) -> list[MissionItem]:
-    """The list a download of ``mission_type`` serves (home first for MISSION)."""
+    """The list a download of ``mission_type`` serves (home first for MISSION; none for a type
+    that is not a list)."""
     if mission_type == MissionType.MISSION:
         return [home_item(vehicle_home or mission.home), *mission.items]
+    if not is_list_type(mission_type):
+        return []
     return list(mission.of_type(MissionType(mission_type)))
 
 
-def check_item(item: MissionItem, mission_type: int) -> int:
-    """MAV_MISSION_RESULT for one received item (MAV_MISSION_ACCEPTED if usable)."""
-    values = (item.param1, item.param2, item.param3, item.param4, item.x, item.y, item.z)
-    if any(math.isinf(v) for v in values):
-        return mav.MAV_MISSION_ERROR
-    if mission_type == MissionType.FENCE and item.command not in FENCE_COMMANDS:
-        return mav.MAV_MISSION_UNSUPPORTED
-    if mission_type == MissionType.RALLY and item.command not in RALLY_COMMANDS:
-        return mav.MAV_MISSION_UNSUPPORTED
-    if item.is_global and not (item.x == 0.0 and item.y == 0.0):
-        if not -90.0 <= item.x <= 90.0:
-            return mav.MAV_MISSION_INVALID_PARAM5_X
-        if not -180.0 <= item.y <= 180.0:
-            return mav.MAV_MISSION_INVALID_PARAM6_Y
-    return mav.MAV_MISSION_ACCEPTED
+def result_of(problems: list) -> int:
+    """MAV_MISSION_RESULT for validation problems (MAV_MISSION_ACCEPTED if there are none)."""
+    if not problems:
+        return mav.MAV_MISSION_ACCEPTED
+    return RESULT_BY_FIELD.get(getattr(problems[0], "field", ""), mav.MAV_MISSION_INVALID)
+
+
+def check_item(item: MissionItem, mission_type: int, seq: int) -> int:
+    """MAV_MISSION_RESULT for one received item at wire ``seq`` (MAV_MISSION_ACCEPTED if usable).
+    Seq 0 of a MISSION list is home: only its position is checked (lat = lon = 0 is no home)."""
+    if mission_type == MissionType.MISSION and seq == 0:
+        home = home_from_item(item)
+        problems = validate(Mission(home=home), math.inf, parts=(MissionType.MISSION,))[0] if home else []
+        return result_of(problems)
+    return result_of(item_problems(item, MissionType(mission_type), f"item {seq}"))
+
+
+def check_list(mission: Mission, mission_type: int) -> int:
+    """MAV_MISSION_RESULT for a complete uploaded list inside ``mission`` (all the rules)."""
+    return result_of(validate(mission, math.inf, parts=(MissionType(mission_type),))[0])
 
 
 def with_type(mission: Mission, mission_type: int, wire: list[MissionItem]) -> Mission:
@@ -164,12 +211,15 @@ class _Upload:
 
 @dataclass
 class _Completed:
-    """The last finished upload, to repeat its ACK if the sender did not get it."""
+    """The last finished upload, to repeat its ACK if the sender did not get it: only to the same
+    last item (seq and content) and only until another transfer starts, so that the resent last
+    item of a later upload that was cancelled can never collect this one's ACK."""
 
     sender: Sender
     mission_type: int
     count: int
     result: int
+    last: MissionItem | None
 
 
 class MissionService:
@@ -230,6 +280,8 @@ class MissionService:
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
             return self._on_request(msg, sender)
         if kind == "MISSION_REQUEST_LIST":
+            if not is_list_type(msg.mission_type):
+                return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
             return [mav.MAVLink_mission_count_message(*sender, self.count(msg.mission_type), msg.mission_type)]
         if kind == "MISSION_CLEAR_ALL":
             return self._on_clear(msg, sender)
@@ -244,6 +296,7 @@ class MissionService:
             return []
         if now_s - up.last_progress_s >= self.params.mission_upload_timeout_s:
             self._upload = None
+            self._completed = None
             return [self._ack(up.sender, mav.MAV_MISSION_OPERATION_CANCELLED, up.mission_type)]
         if now_s - up.last_request_s >= self.params.mission_item_retry_s:
             return [self._request(up, now_s)]
@@ -287,7 +340,8 @@ class MissionService:
         if self._busy_for(sender):
             return [self._ack(sender, mav.MAV_MISSION_DENIED, mission_type)]
         self._upload = None  # a repeated COUNT from the uploader restarts
-        if mission_type not in tuple(MissionType):
+        self._completed = None
+        if not is_list_type(mission_type):
             return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, mission_type)]
         if msg.count > self.params.mission_max_items:
             return [self._ack(sender, mav.MAV_MISSION_NO_SPACE, mission_type)]
@@ -300,7 +354,10 @@ class MissionService:
         up = self._upload
         if up is None:
             done = self._completed
-            if done and done.sender == sender and done.mission_type == msg.mission_type and msg.seq == done.count - 1:
+            if (
+                done and done.sender == sender and done.mission_type == msg.mission_type and msg.seq == done.count - 1
+                and done.last is not None and item_from_message(msg).same_as(done.last)
+            ):  # fmt: skip
                 return [self._ack(sender, done.result, done.mission_type)]
             return []
         if up.sender != sender:
@@ -313,7 +370,7 @@ class MissionService:
         if msg.seq > expected:
             return [self._request(up, now_s)]
         item = item_from_message(msg)
-        result = check_item(item, up.mission_type)
+        result = check_item(item, up.mission_type, msg.seq)
         if result != mav.MAV_MISSION_ACCEPTED:
             self._upload = None
             return [self._ack(sender, result, up.mission_type)]
@@ -325,9 +382,12 @@ class MissionService:
         return [self._finish(sender, up.mission_type, up.received, up.count)]
 
     def _finish(self, sender: Sender, mission_type: int, wire: list[MissionItem], count: int):
-        """Commit a complete upload (or an empty one) and build its ACK."""
-        result = self._store(with_type(self.mission, mission_type, wire), mission_type)
-        self._completed = _Completed(sender, mission_type, count, result)
+        """Validate and commit a complete upload (or an empty one) and build its ACK."""
+        new = with_type(self.mission, mission_type, wire)
+        result = check_list(new, mission_type)
+        if result == mav.MAV_MISSION_ACCEPTED:
+            result = self._store(new, mission_type)
+        self._completed = _Completed(sender, mission_type, count, result, wire[-1] if wire else None)
         return self._ack(sender, result, mission_type)
 
     def _store(self, new: Mission, mission_type: int) -> int:
@@ -339,7 +399,9 @@ class MissionService:
         return mav.MAV_MISSION_ACCEPTED
 
     def _on_request(self, msg, sender: Sender) -> list:
-        wire = wire_items(self.mission, msg.mission_type, self.vehicle_home) if msg.mission_type in tuple(MissionType) else []
+        if not is_list_type(msg.mission_type):
+            return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
+        wire = wire_items(self.mission, msg.mission_type, self.vehicle_home)
         if not 0 <= msg.seq < len(wire):
             return [self._ack(sender, mav.MAV_MISSION_INVALID_SEQUENCE, msg.mission_type)]
         current = msg.mission_type == MissionType.MISSION and msg.seq == self.current_seq
@@ -348,7 +410,7 @@ class MissionService:
     def _on_clear(self, msg, sender: Sender) -> list:
         if self._busy_for(sender):
             return [self._ack(sender, mav.MAV_MISSION_DENIED, msg.mission_type)]
-        if msg.mission_type not in (*tuple(MissionType), MISSION_TYPE_ALL):
+        if not (is_list_type(msg.mission_type) or msg.mission_type == MISSION_TYPE_ALL):
             return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
         self._upload = None
         return [self._ack(sender, self._store(cleared(self.mission, msg.mission_type), msg.mission_type), msg.mission_type)]

@@ -6,13 +6,19 @@ points of that autopilot, one mission type at a time:
 
 * upload: MISSION_COUNT, then answer every MISSION_REQUEST_INT / MISSION_REQUEST with the item
   asked for (so a lost item is simply asked for again), until MISSION_ACK. The final ACK counts
-  only once the last item has been sent (a stale ACK cannot end an upload early).
+  only once every item has been sent in this transfer (a stale ACK, or a late request of an
+  earlier upload, cannot end an upload early).
 * download: MISSION_REQUEST_LIST -> MISSION_COUNT, MISSION_REQUEST_INT for each seq -> item,
   then MISSION_ACK.
 * clear: MISSION_CLEAR_ALL -> MISSION_ACK.
 
-A request without an answer is resent every ``client_retry_s``, up to ``client_retries`` times
-in a row; then, or on a refusing ACK, ``MissionClientError`` says what failed in one line.
+Timeouts and retries follow the protocol (mavlink.io services/mission): MISSION_COUNT,
+MISSION_REQUEST_LIST and MISSION_CLEAR_ALL are resent after ``client_retry_s`` (1.5 s) without an
+answer, an uploaded item or a download's item request after ``client_item_retry_s`` (0.25 s), each
+at most ``client_retries`` (5) times in a row; then, or on a refusing ACK, ``MissionClientError``
+says what failed in one line. A refusal or a timeout before the last item was sent leaves the
+vehicle's list as it was; a timeout after it (``MissionClientError.maybe_stored``) cannot tell
+whether the vehicle stored the upload: download to check.
 ``upload(mission)`` sends each non-empty part: the mission items (with home at seq 0), the fence
 and the rally points. The protocol waits are blocking (it is a command-line client).
 """
@@ -38,7 +44,12 @@ TYPE_NAMES = {MissionType.MISSION: "mission", MissionType.FENCE: "fence", Missio
 
 
 class MissionClientError(Exception):
-    """A refused or timed-out mission transfer; the message is one line."""
+    """A refused or timed-out mission transfer; the message is one line. ``maybe_stored``: an
+    upload timed out after its last item went out, so the vehicle may have stored it."""
+
+    def __init__(self, message: str, maybe_stored: bool = False) -> None:
+        super().__init__(message)
+        self.maybe_stored = maybe_stored
 
 
 def result_name(result: int) -> str:
@@ -109,9 +120,19 @@ class MissionClient:
         what = f"{TYPE_NAMES[mission_type]} upload"
         last = mav.MAVLink_mission_count_message(*target, len(items), mission_type)
         self.conn.mav.send(last)
+        sent: set[int] = set()
         last_sent = False
+        retry_s = self.params.client_retry_s
         while True:
-            msg = self._await(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"), mission_type, last, what)
+            try:
+                msg = self._await(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"), mission_type, last, what, retry_s)
+            except MissionClientError as exc:
+                if last_sent:
+                    raise MissionClientError(
+                        f"{what}: every item sent but no acknowledgement came: the vehicle may or may not have "
+                        "stored it (download to check)", maybe_stored=True,
+                    ) from None  # fmt: skip
+                raise exc from None
             if msg.get_type() == "MISSION_ACK":
                 if msg.type != mav.MAV_MISSION_ACCEPTED:
                     raise MissionClientError(f"{what} refused by the vehicle: {result_name(msg.type)}")
@@ -122,7 +143,11 @@ class MissionClient:
                 raise MissionClientError(f"{what}: vehicle asked for item {msg.seq} of {len(items)}")
             last = item_message(items[msg.seq], msg.seq, mission_type, target)
             self.conn.mav.send(last)
-            last_sent = last_sent or msg.seq == len(items) - 1
+            retry_s = self.params.client_item_retry_s
+            # The vehicle asks in order, so its ACK can only be this transfer's once every item went
+            # out in it: a late request of an earlier upload must not make a stale ACK count.
+            sent.add(msg.seq)
+            last_sent = len(sent) == len(items)
             if progress:
                 progress(mission_type, msg.seq + 1, len(items))
 
@@ -132,13 +157,14 @@ class MissionClient:
         what = f"{TYPE_NAMES[mission_type]} download"
         request = mav.MAVLink_mission_request_list_message(*target, mission_type)
         self.conn.mav.send(request)
-        count = self._await(("MISSION_COUNT",), mission_type, request, what).count
+        count = self._await(("MISSION_COUNT",), mission_type, request, what, self.params.client_retry_s).count
         items = []
         for seq in range(count):
             request = mav.MAVLink_mission_request_int_message(*target, seq, mission_type)
             self.conn.mav.send(request)
             while True:
-                msg = self._await(("MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"), mission_type, request, what)
+                msg = self._await(("MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"), mission_type, request, what,
+                                  self.params.client_item_retry_s)  # fmt: skip
                 if msg.get_type() == "MISSION_ACK":
                     if msg.type != mav.MAV_MISSION_ACCEPTED:
                         raise MissionClientError(f"{what} refused by the vehicle: {result_name(msg.type)}")
@@ -156,7 +182,7 @@ class MissionClient:
         request = mav.MAVLink_mission_clear_all_message(*target, mission_type)
         self.conn.mav.send(request)
         what = "clear"
-        msg = self._await(("MISSION_ACK",), mission_type, request, what)
+        msg = self._await(("MISSION_ACK",), mission_type, request, what, self.params.client_retry_s)
         if msg.type != mav.MAV_MISSION_ACCEPTED:
             raise MissionClientError(f"{what} refused by the vehicle: {result_name(msg.type)}")
 
@@ -167,19 +193,20 @@ class MissionClient:
             self.connect()
         return self.target
 
-    def _await(self, kinds: tuple[str, ...], mission_type: int, resend, what: str):
-        """The next message of ``kinds`` for us from the target, resending ``resend`` on silence."""
+    def _await(self, kinds: tuple[str, ...], mission_type: int, resend, what: str, retry_s: float):
+        """The next message of ``kinds`` for us from the target, resending ``resend`` after each
+        ``retry_s`` of silence, ``client_retries`` times at most."""
         for _ in range(self.params.client_retries + 1):
-            msg = self._receive(kinds, mission_type)
+            msg = self._receive(kinds, mission_type, retry_s)
             if msg is not None:
                 return msg
             self.conn.mav.send(resend)
-        waited_s = (self.params.client_retries + 1) * self.params.client_retry_s
+        waited_s = (self.params.client_retries + 1) * retry_s
         raise MissionClientError(f"{what}: no answer from the vehicle within {waited_s:g} s ({self.url})")
 
-    def _receive(self, kinds: tuple[str, ...], mission_type: int):
-        """A matching message within one retry period, or None."""
-        end = time.monotonic() + self.params.client_retry_s
+    def _receive(self, kinds: tuple[str, ...], mission_type: int, retry_s: float):
+        """A matching message within ``retry_s``, or None."""
+        end = time.monotonic() + retry_s
         while (left := end - time.monotonic()) > 0:
             msg = self.conn.recv_match(type=list(kinds), blocking=True, timeout=left)
             if msg is None:

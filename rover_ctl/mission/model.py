@@ -42,6 +42,21 @@ FRAME_GLOBAL = 0
 FRAME_MISSION = 2
 FRAME_GLOBAL_RELATIVE_ALT = 3
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})  # GLOBAL, _RELATIVE_ALT, _INT variants, _TERRAIN_ALT
+LOCAL_FRAMES = frozenset({1, 4, 7, 8, 9, 20, 21})
+"""MAV_FRAME_LOCAL_NED/ENU and body/offset variants: x/y are metres * 1e4 in MISSION_ITEM_INT."""
+GLOBAL_XY_SCALE = 1e7
+"""MISSION_ITEM_INT x/y of a global frame: degrees * 1e7."""
+LOCAL_XY_SCALE = 1e4
+"""MISSION_ITEM_INT x/y of a local frame: metres * 1e4; any other frame carries them raw."""
+MAX_COMMAND = 0xFFFF
+"""MISSION_ITEM_INT.command is a uint16."""
+MAX_FRAME = 0xFF
+"""MISSION_ITEM_INT.frame is a uint8."""
+
+
+def xy_scale(frame: int) -> float:
+    """Model x/y -> MISSION_ITEM_INT x/y integer factor for ``frame`` (MISSION_ITEM_INT spec)."""
+    return GLOBAL_XY_SCALE if frame in GLOBAL_FRAMES else LOCAL_XY_SCALE if frame in LOCAL_FRAMES else 1.0
 
 
 @dataclass(frozen=True)

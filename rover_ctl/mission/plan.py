@@ -71,16 +71,16 @@ def _number(value: Any, where: str, errors: list[str], allow_null: bool = False)
     if value is None and allow_null:
         return math.nan
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        errors.append(f"{where}: expected a number, got {json.dumps(value)}")
+        errors.append(f"{where}: expected a number, got {json.dumps(value)[:40]}")
         return math.nan
     return float(value)
 
 
 def _whole(value: Any, where: str, errors: list[str]) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        if isinstance(value, float) and value == int(value):
+        if isinstance(value, float) and math.isfinite(value) and value == int(value):
             return int(value)
-        errors.append(f"{where}: expected a whole number, got {json.dumps(value)}")
+        errors.append(f"{where}: expected a whole number, got {json.dumps(value)[:40]}")
         return 0
     return value
 
@@ -225,6 +225,12 @@ def parse_plan(text: str, source: str) -> Parsed:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         parsed.errors.append(f"{source}:{exc.lineno}: invalid JSON: {exc.msg} (column {exc.colno})")
+        return parsed
+    except ValueError as exc:  # an integer of more digits than Python converts
+        parsed.errors.append(f"{source}: invalid JSON: {str(exc).splitlines()[0]}")
+        return parsed
+    except RecursionError:
+        parsed.errors.append(f"{source}: invalid JSON: nested too deeply")
         return parsed
     try:
         if not isinstance(doc, dict):

@@ -5,7 +5,9 @@ Python's json writes them). ``save`` is atomic: write a temporary file in the sa
 fsync it, rename it over the store, fsync the directory; a crash leaves either the old or the new
 file, never a torn one. ``load`` of a missing file is an empty mission; a file that cannot be read
 raises ``StoreError`` naming the file and the problem, and ``quarantine`` moves it aside
-(``<name>.corrupt``, ``<name>.corrupt.1``, ...) so it is never silently overwritten.
+(``<name>.corrupt``, ``<name>.corrupt.1``, ...) so it is never silently overwritten. ``load`` checks
+types only: a readable store whose plan breaks the mission rules (written by an older version)
+still loads, and the planner and executor leave its invalid parts out.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ VERSION = 1
 
 
 NUMBER_FIELDS = ("command", "frame", "param1", "param2", "param3", "param4", "x", "y", "z")
+INT_FIELDS = ("command", "frame")
 
 
 def _is_number(value: Any) -> bool:
@@ -62,6 +65,7 @@ def from_json(data: Any, where: str) -> Mission:
             except TypeError as exc:
                 raise StoreError(f"{where}: {key}[{index}]: {exc}") from None
             bad = [name for name in NUMBER_FIELDS if not _is_number(getattr(item, name))]
+            bad += [name for name in INT_FIELDS if name not in bad and not isinstance(getattr(item, name), int)]
             if bad or not isinstance(item.autocontinue, bool):
                 raise StoreError(f"{where}: {key}[{index}]: {', '.join(bad) or 'autocontinue'} has the wrong type")
             out.append(item)
@@ -92,8 +96,8 @@ class MissionStore:
             raise StoreError(f"{self.path}: cannot read mission store: {exc}") from None
         try:
             data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise StoreError(f"{self.path}: corrupt mission store: {exc}") from None
+        except (ValueError, RecursionError) as exc:  # JSONDecodeError, a 5000-digit number, nesting
+            raise StoreError(f"{self.path}: corrupt mission store: {str(exc).splitlines()[0] or type(exc).__name__}") from None
         return from_json(data, str(self.path))
 
     def save(self, mission: Mission) -> None:

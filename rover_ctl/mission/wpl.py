@@ -20,6 +20,8 @@ from rover_ctl.mission.model import (
     FRAME_GLOBAL,
     RALLY_COMMANDS,
     Cmd,
+    MAX_COMMAND,
+    MAX_FRAME,
     Home,
     MissionItem,
     MissionType,
@@ -31,6 +33,10 @@ COLUMNS = ("seq", "current", "frame", "command", "param1", "param2", "param3", "
            "latitude/x", "longitude/y", "altitude/z", "autocontinue")  # fmt: skip
 INT_COLUMNS = frozenset({0, 1, 2, 3, 11})
 FLAG_COLUMNS = frozenset({1, 11})
+MAX_SEQ = 0xFFFF
+"""MISSION_ITEM_INT.seq is a uint16."""
+INT_COLUMN_MAX = {0: MAX_SEQ, 1: 1, 2: MAX_FRAME, 3: MAX_COMMAND, 11: 1}
+"""Largest value of each integer column: the width of its MISSION_ITEM_INT field (flags are 0/1)."""
 MISSION_PLANNER_HOME_COMMAND = 0
 """Mission Planner writes home as command 0; ArduPilot and MAVProxy read it as NAV_WAYPOINT."""
 MIN_DECIMALS = 6
@@ -54,19 +60,22 @@ def _parse_row(fields: list[str], where: str, errors: list[str]) -> list[float] 
         name = f"column {col + 1} ({COLUMNS[col]})"
         if col in INT_COLUMNS:
             try:
-                value = float(int(text))
-            except ValueError:
-                errors.append(f"{where}: {name} is not a whole number: {text!r}")
+                number = int(text)
+            except ValueError:  # also a number of more digits than Python converts
+                errors.append(f"{where}: {name} is not a whole number: {text[:40]!r}")
                 ok = False
                 continue
-            if col in FLAG_COLUMNS and value not in (0.0, 1.0):
-                errors.append(f"{where}: {name} must be 0 or 1, got {text}")
+            if not 0 <= number <= INT_COLUMN_MAX[col]:
+                limits = "0 or 1" if col in FLAG_COLUMNS else f"0-{INT_COLUMN_MAX[col]}"
+                errors.append(f"{where}: {name} must be {limits}, got {text[:40]}")
                 ok = False
+                continue
+            value = float(number)
         else:
             try:
                 value = float(text)
             except ValueError:
-                errors.append(f"{where}: {name} is not a number: {text!r}")
+                errors.append(f"{where}: {name} is not a number: {text[:40]!r}")
                 ok = False
                 continue
             if math.isinf(value):

@@ -47,6 +47,7 @@ API:
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Sequence
@@ -59,8 +60,10 @@ from shapely.geometry.polygon import orient
 from shapely.ops import nearest_points, unary_union
 
 from rover_ctl.config import PlannerParams, RobotParams
-from rover_ctl.mission.model import Mission, MissionItem, polygon_runs
+from rover_ctl.mission.model import FENCE_CIRCLE_COMMANDS, Cmd, Mission, MissionItem, MissionType, polygon_runs
 from rover_ctl.mission.validate import validate
+
+log = logging.getLogger(__name__)
 
 EN = tuple[float, float]
 
@@ -72,10 +75,6 @@ TANGENT_TOLERANCE = 1e-9
 
 UNBOUNDED_M = 1.0e6
 """Half-size of the square that stands for the plane when there is no inclusion fence."""
-
-
-class FenceError(ValueError):
-    """Fence items that do not describe valid polygons/circles; the message names the item."""
 
 
 @dataclass(frozen=True)
@@ -97,22 +96,44 @@ class Fence:
     @classmethod
     def from_items(cls, items: Sequence[MissionItem], to_enu: Callable[[float, float], EN]) -> "Fence":
         """The fence of MAV_CMD_NAV_FENCE_* items (mission_type FENCE), via the mission model's
-        typed views; ``to_enu(lat, lon)`` is the local frame. Raises ``FenceError`` naming the
-        first bad item (validation of ``rover_ctl.mission.validate``, plus self-intersection)."""
+        typed views; ``to_enu(lat, lon)`` is the local frame. Never raises: a part that is not
+        valid (the rules of ``rover_ctl.mission.validate``, plus self-intersection in ENU) is left
+        out with a logged warning naming it -- a stored plan may come from an older version that
+        did not check it, and the rover must still start."""
+        fence, ignored = cls.checked(items, to_enu)
+        for reason in ignored:
+            log.warning("fence part ignored: %s", reason)
+        return fence
+
+    @classmethod
+    def checked(cls, items: Sequence[MissionItem], to_enu: Callable[[float, float], EN]) -> tuple["Fence", list[str]]:
+        """``(fence of the valid parts, why each other part was left out)``."""
         mission = Mission(fence=list(items))
-        errors, _ = validate(mission, math.inf)
-        if errors:
-            raise FenceError(errors[0])
+        errors, _ = validate(mission, math.inf, parts=(MissionType.FENCE,))
+        ignored = [str(e) for e in errors]
         polygons: dict[bool, list] = {True: [], False: []}
-        for index, polygon in zip((start for start, _ in polygon_runs(mission.fence)), mission.fence_polygons()):
-            vertices = tuple(tuple(map(float, to_enu(lat, lon))) for lat, lon in polygon.vertices_latlon)
-            if not Polygon(vertices).is_valid:
-                raise FenceError(f"fence item {index}: polygon of {len(vertices)} vertices intersects itself")
+        for (start, stop), polygon in zip(polygon_runs(mission.fence), mission.fence_polygons()):
+            where = f"fence item {start}"
+            if any(e.startswith(f"{where}:") or e.startswith(f"fence item {k}:") for e in errors for k in range(start, stop)):
+                continue  # reported above
+            vertices = tuple(_enu(to_enu, lat, lon) for lat, lon in polygon.vertices_latlon)
+            if not all(map(math.isfinite, sum(vertices, ()))) or not Polygon(vertices).is_valid:
+                ignored.append(f"{where}: polygon of {len(vertices)} vertices intersects itself")
+                continue
             polygons[polygon.inclusion].append(vertices)
         circles: dict[bool, list] = {True: [], False: []}
-        for circle in mission.fence_circles():
-            circles[circle.inclusion].append(Circle(tuple(map(float, to_enu(*circle.center_latlon))), float(circle.radius_m)))
-        return cls(tuple(polygons[True]), tuple(polygons[False]), tuple(circles[True]), tuple(circles[False]))
+        for index, item in enumerate(mission.fence):
+            if item.command not in FENCE_CIRCLE_COMMANDS or any(e.startswith(f"fence item {index}:") for e in errors):
+                continue
+            center = _enu(to_enu, item.lat_deg, item.lon_deg)
+            if all(map(math.isfinite, center)):
+                circles[item.command == Cmd.NAV_FENCE_CIRCLE_INCLUSION].append(Circle(center, float(item.param1)))
+        return cls(tuple(polygons[True]), tuple(polygons[False]), tuple(circles[True]), tuple(circles[False])), ignored
+
+
+def _enu(to_enu: Callable[[float, float], EN], lat_deg: float, lon_deg: float) -> EN:
+    east, north = to_enu(lat_deg, lon_deg)
+    return (float(east), float(north))
 
 
 @dataclass(frozen=True)

@@ -190,6 +190,6 @@ def test_a_fence_the_planner_cannot_use_is_ignored_and_refuses_arming():
     bad = [replace(waypoint(0, 0, Cmd.NAV_FENCE_CIRCLE_INCLUSION), param1=0.0)]  # zero radius
     bench.home(Mission(items=[waypoint(0.0, 10.0)], fence=bad))
     bench.step()
-    assert bench.texts[0].startswith("Fence ignored:")
+    assert bench.texts[0].startswith("Fence part ignored:")
     assert not bench.request(bench.autopilot.arm(True)).accepted
     assert any(t.startswith("PreArm: fence unusable") for t in bench.texts)

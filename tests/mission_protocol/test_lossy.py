@@ -154,3 +154,85 @@ def test_an_abandoned_upload_times_out_and_keeps_the_stored_mission(udp_port, mi
         ack = expect(conn, "MISSION_ACK", timeout_s=LINK.mission_upload_timeout_s + 2.0)
         assert ack.type == mav.MAV_MISSION_OPERATION_CANCELLED
         assert lt.link.service.mission is mission
+
+
+TIME_SCALE = 0.1
+"""The protocol's timeouts (1500 ms, 250 ms item, 5 retries: GcsParams' defaults) run 10x faster
+here so that 30 lossy uploads take seconds; the ratios between them are the real ones."""
+DEFAULTS = GcsParams()
+SCALED_LINK = GcsParams(
+    mission_item_retry_s=DEFAULTS.mission_item_retry_s * TIME_SCALE,
+    mission_upload_timeout_s=DEFAULTS.mission_upload_timeout_s * TIME_SCALE,
+    heartbeat_period_s=0.2,
+)
+SCALED_CLIENT = GcsParams(
+    client_retry_s=DEFAULTS.client_retry_s * TIME_SCALE,
+    client_item_retry_s=DEFAULTS.client_item_retry_s * TIME_SCALE,
+    client_connect_timeout_s=3.0,
+)
+
+
+def sixty_items(k: int) -> Mission:
+    """A 60-item mission (59 waypoints after home... plus speed), different for every k."""
+    base = sample_mission(58)
+    return Mission(items=[replace(i, z=float(k)) for i in base.items], home=base.home)
+
+
+def test_protocol_timeouts_are_the_specs():
+    # mavlink.io services/mission, "Timeouts and Retries": 1500 ms default, 250 ms items, 5 retries
+    assert (DEFAULTS.client_retry_s, DEFAULTS.client_item_retry_s, DEFAULTS.client_retries) == (1.5, 0.25, 5)
+    assert (DEFAULTS.mission_item_retry_s, DEFAULTS.mission_upload_timeout_s) == (0.25, 1.5)
+
+
+def test_30_uploads_of_60_items_through_loss_duplication_and_reordering_are_never_partial(udp_port):
+    outcomes = {"stored": 0, "refused": 0, "unknown": 0}
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=SCALED_LINK) as lt, LossyProxy(
+        udp_port, seed=30, p_drop=0.2, p_dup=0.1, p_hold=0.2, hold_s=0.02
+    ) as proxy:
+        previous = lt.link.service.mission
+        with MissionClient(f"udpout:127.0.0.1:{proxy.port}", SCALED_CLIENT) as client:
+            client.connect()
+            for k in range(30):
+                new = sixty_items(k)
+                assert len(wire_items(new, MissionType.MISSION)) == 60
+                try:
+                    client.upload(new)
+                    error = None
+                except MissionClientError as exc:
+                    error = exc
+                settled(lt)
+                stored = lt.link.service.mission
+                if error is None:
+                    outcomes["stored"] += 1
+                    assert stored.same_as(new), f"upload {k} acknowledged but the stored mission differs"
+                elif error.maybe_stored:
+                    outcomes["unknown"] += 1
+                    assert stored.same_as(new) or stored.same_as(previous), f"upload {k}: partial ({error})"
+                else:
+                    outcomes["refused"] += 1
+                    assert stored.same_as(previous), f"upload {k} refused ({error}) but the stored mission changed"
+                previous = stored
+    print(f"30 uploads of 60 items: {outcomes}; proxy {proxy.stats}")
+    assert outcomes["stored"] >= 20, (outcomes, proxy.stats)  # the retries do carry most uploads through
+    assert min(proxy.stats["dropped"], proxy.stats["duplicated"], proxy.stats["reordered"]) > 100, proxy.stats
+
+
+def test_a_late_request_and_ack_of_the_previous_upload_do_not_end_the_next_one(udp_port):
+    """The race the lossy run found: the previous upload's last request (held back by the network)
+    and its repeated ACK reach the client at the start of the next upload."""
+    vehicle = gcs(udp_port, (1, 1))  # plays the vehicle on a udpout socket; the client listens
+    new = sixty_items(1)
+    with MissionClient(f"udpin:127.0.0.1:{udp_port}", SCALED_CLIENT) as client:
+        client.target = (1, 1)
+        vehicle.mav.heartbeat_send(mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)
+        client.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=2)
+        last = len(wire_items(new, MissionType.MISSION)) - 1
+        vehicle.mav.mission_request_int_send(255, 190, last, 0)  # the earlier upload's last request
+        vehicle.mav.mission_ack_send(255, 190, mav.MAV_MISSION_ACCEPTED, 0)  # its repeated ACK
+        try:
+            client.upload_items(MissionType.MISSION, wire_items(new, MissionType.MISSION))
+            ended = "acknowledged"
+        except MissionClientError:
+            ended = "timed out"
+    vehicle.close()
+    assert ended == "timed out"  # this vehicle never asked for items 0..58: nothing was stored

@@ -186,7 +186,7 @@ def test_tick_re_requests_then_times_out_leaving_the_mission_untouched(svc, rec,
         (0, MissionItem(16, x=-35.0, y=190.0), mav.MAV_MISSION_INVALID_PARAM6_Y),
         (1, MissionItem(16, x=-35.0, y=149.0), mav.MAV_MISSION_UNSUPPORTED),
         (2, MissionItem(5001, x=-35.0, y=149.0), mav.MAV_MISSION_UNSUPPORTED),
-        (0, MissionItem(16, param1=float("inf"), x=-35.0, y=149.0), mav.MAV_MISSION_ERROR),
+        (0, MissionItem(16, param1=float("inf"), x=-35.0, y=149.0), mav.MAV_MISSION_INVALID_PARAM1),
     ],
 )
 def test_an_invalid_item_refuses_the_upload_and_keeps_the_stored_mission(svc, rec, mission, mission_type, item, result):
@@ -257,3 +257,17 @@ def test_coordinates_scale_by_frame(frame, x, y, wire):
     item = MissionItem(16, frame=frame, x=x, y=y)
     assert encode_xy(item) == wire
     assert decode_xy(frame, *wire) == pytest.approx((x, y), abs=1e-9)
+
+
+def test_a_cancelled_upload_never_collects_the_previous_uploads_ack(svc, rec, mission):
+    wire = wire_items(mission, MissionType.MISSION)
+    upload(svc, wire)  # stored; its ACK could be repeated to a resent last item
+    changed = [*wire[:-1], MissionItem(16, x=wire[-1].x, y=wire[-1].y, z=99.0)]
+    send(svc, mav.MAVLink_mission_count_message(1, 1, len(changed), 0))
+    for seq, item in enumerate(changed[:-1]):
+        send(svc, item_int(item, seq))
+    assert one(svc.tick(PARAMS.mission_upload_timeout_s), "MISSION_ACK").type == mav.MAV_MISSION_OPERATION_CANCELLED
+    # the lost-ACK case of the cancelled upload: its last item comes late, and must not be ACCEPTED
+    assert send(svc, item_int(changed[-1], len(changed) - 1)) == []
+    assert send(svc, item_int(wire[-1], len(wire) - 1)) == []
+    assert len(rec.commits) == 1

@@ -10,7 +10,7 @@ from shapely.geometry import LineString, Point, Polygon
 from rover_ctl.config import PlannerParams, RobotParams
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.model import MissionItem
-from rover_ctl.navigation.planner import Circle, Fence, FenceError, Path, PathFollower, Planner
+from rover_ctl.navigation.planner import Circle, Fence, Path, PathFollower, Planner
 
 PARAMS = PlannerParams()
 ROBOT = RobotParams()
@@ -183,10 +183,20 @@ def test_follower_reports_unreachable_goal_and_retries():
         ([MissionItem(5001, param1=4, x=x, y=y) for x, y in [(0, 0), (1, 1), (0, 1), (1, 0)]], "intersects itself"),
     ],
 )
-def test_bad_fence_items_are_refused_with_the_item_named(items, message):
-    with pytest.raises(FenceError, match=message) as err:
-        Fence.from_items(items, lambda lat, lon: (lon, lat))
-    assert str(err.value).startswith("fence item 0")
+def test_bad_fence_items_are_left_out_with_the_item_named(items, message, caplog):
+    fence, ignored = Fence.checked(items, lambda lat, lon: (lon, lat))
+    assert fence == Fence()
+    assert ignored and ignored[0].startswith("fence item 0") and message in ignored[0]
+    assert Fence.from_items(items, lambda lat, lon: (lon, lat)) == Fence()  # never raises: logs instead
+    assert message in caplog.text
+
+
+def test_only_the_invalid_parts_of_a_fence_are_left_out():
+    square = [MissionItem(5002, param1=4, x=x, y=y) for x, y in [(0, 0), (0, 1e-4), (1e-4, 1e-4), (1e-4, 0)]]
+    items = [MissionItem(5004, param1=0, x=0, y=0), *square, MissionItem(5004, param1=3, x=1, y=1)]
+    fence, ignored = Fence.checked(items, lambda lat, lon: (lon * 1e5, lat * 1e5))
+    assert len(fence.exclusion_polygons) == 1 and fence.exclusion_circles == (Circle((1e5, 1e5), 3.0),)
+    assert ignored == ["fence item 0: fence circle radius 0 m must be > 0"]
 
 
 def test_reduced_visibility_graph_is_as_short_as_the_full_one():

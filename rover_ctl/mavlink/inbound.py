@@ -1,0 +1,177 @@
+"""The GCS link's gate: every received message is checked here before a microservice sees it.
+
+The GCS port may be reachable by strangers, so nothing a frame carries is trusted. ``Inbound.check``
+looks at every field a microservice reads and returns a ``Verdict``:
+
+* pass: the message is well formed (enums in range, floats finite where they are used, integer
+  params whole and within the field they stand for, addressed to us or broadcast). A NaN in an
+  optional command param that means "default" (ARM_DISARM's force flag) is read as its default;
+* refuse: the protocol has an answer for a malformed request, which the verdict carries
+  (COMMAND_ACK MAV_RESULT_DENIED for a command with a bad param; the mission service answers its
+  own errors with MISSION_ACK, see ``rover_ctl.mavlink.mission``);
+* drop: no answer exists (a SET_MODE to an unknown mode, a non-finite PARAM_SET, a message for
+  another component, a frame that failed its CRC): counted in ``Inbound.dropped`` by reason.
+
+``Inbound.failed(msg, exc)`` is the link edge's last resort: a handler that raised anyway is logged
+once per (message type, exception type) with the frame in hex, counted, and the link goes on.
+
+On a UDP link each datagram is parsed on its own (``Inbound(params, conn)`` wraps ``conn.recv``):
+pymavlink's parser is a byte stream, so the unfinished frame a stray datagram leaves (any 0xFD or
+0xFE byte starts one) would swallow the bytes of the next datagram -- of any sender, and after one
+random datagram in two. A frame never spans datagrams, so what one leaves unparsed is dropped.
+
+Which params each command reads follows ``rover_ctl.mavlink.commands``; a command it does not
+handle is passed through (it answers MAV_RESULT_UNSUPPORTED without reading a param).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from pymavlink import mavutil
+
+from rover_ctl.config import GcsParams
+from rover_ctl.vocabulary import mav
+
+log = logging.getLogger(__name__)
+
+MAX_MSG_ID = 2**24 - 1
+"""MAVLink 2 message ids are 24 bits (REQUEST_MESSAGE, SET_MESSAGE_INTERVAL param1)."""
+MAX_SEQ = 0xFFFF
+"""Mission sequence numbers are uint16 (DO_SET_MISSION_CURRENT param1)."""
+ROVER_MODES = frozenset(value for value, entry in mav.enums["ROVER_MODE"].items() if not entry.name.endswith("_ENUM_END"))
+"""ArduPilot Rover's custom modes (the dialect's enum, without its generated ``_ENUM_END``)."""
+ARM_VALUES = (0.0, 1.0)
+"""ARM_DISARM param1: 0 disarm, 1 arm; anything else is not a request to do either."""
+COMMANDS = ("COMMAND_LONG", "COMMAND_INT")
+UNFINISHED = "unfinished frame at the end of a datagram"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    ok: bool
+    reason: str = ""
+    reply: Any = None
+    """The protocol's refusal to send back, when it has one."""
+
+
+PASS = Verdict(True)
+
+
+def _whole_in(value: float, low: float, high: float) -> bool:
+    return math.isfinite(value) and value == int(value) and low <= value <= high
+
+
+# One rule per (command, param slot): a predicate on the value and what it must be. A rule with a
+# default replaces a NaN (MAVLink's "use the default") by it before the predicate.
+Rule = tuple[str, Callable[[float], bool], str, "float | None"]
+PARAM_RULES: dict[int, tuple[Rule, ...]] = {
+    mav.MAV_CMD_COMPONENT_ARM_DISARM: (
+        ("param1", lambda v: v in ARM_VALUES, "0 (disarm) or 1 (arm)", None),
+        ("param2", math.isfinite, "a finite number (21196 forces)", 0.0),
+    ),
+    mav.MAV_CMD_DO_SET_MODE: (("param2", lambda v: _whole_in(v, 0, 2**32 - 1) and int(v) in ROVER_MODES, "a Rover mode", None),),
+    mav.MAV_CMD_DO_SET_MISSION_CURRENT: (("param1", lambda v: _whole_in(v, 0, MAX_SEQ), f"a sequence number 0-{MAX_SEQ}", None),),
+    mav.MAV_CMD_REQUEST_MESSAGE: (("param1", lambda v: _whole_in(v, 0, MAX_MSG_ID), "a message id", None),),
+    mav.MAV_CMD_DO_REPOSITION: (("param2", lambda v: _whole_in(v, 0, 2**32 - 1), "MAV_DO_REPOSITION_FLAGS", 0.0),),
+    mav.MAV_CMD_SET_MESSAGE_INTERVAL: (
+        ("param1", lambda v: _whole_in(v, 0, MAX_MSG_ID), "a message id", None),
+        ("param2", math.isfinite, "a finite interval in us (-1 off, 0 default)", None),
+    ),
+}
+
+
+class Inbound:
+    """Checks messages for one GCS link (``params``: our system and component ids; ``conn``: its
+    pymavlink connection, parsed a datagram at a time when it is UDP)."""
+
+    def __init__(self, params: GcsParams, conn: Any = None) -> None:
+        self.params = params
+        if isinstance(conn, mavutil.mavudp):
+            conn.recv = DatagramFraming(conn.recv, conn.mav, lambda: self._drop(UNFINISHED))
+        self.dropped: Counter[str] = Counter()
+        """Messages dropped without an answer, by reason."""
+        self.refused = 0
+        """Messages answered with the protocol's refusal."""
+        self.failures: Counter[tuple[str, str]] = Counter()
+        """Handler exceptions caught at the link edge, by (message type, exception type)."""
+
+    def check(self, msg) -> Verdict:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            return self._drop("bad data (CRC, length or unknown message)")
+        if kind in COMMANDS:
+            verdict = self._command(msg)
+        elif kind == "SET_MODE":
+            verdict = PASS if msg.custom_mode in ROVER_MODES else Verdict(False, f"SET_MODE to unknown mode {msg.custom_mode}")
+        elif kind == "PARAM_SET":
+            verdict = PASS if math.isfinite(msg.param_value) else Verdict(False, "PARAM_SET of a non-finite value")
+        else:
+            verdict = PASS
+        if verdict.ok:
+            return verdict
+        if verdict.reply is not None:
+            self.refused += 1
+            log.debug("refused %s: %s", kind, verdict.reason)
+        else:
+            self.dropped[verdict.reason] += 1
+        return verdict
+
+    def _drop(self, reason: str) -> Verdict:
+        self.dropped[reason] += 1
+        return Verdict(False, reason)
+
+    def _command(self, msg) -> Verdict:
+        if getattr(msg, "target_component", 0) not in (0, self.params.component_id):
+            return Verdict(False, "command for another component")
+        for slot, valid, wanted, default in PARAM_RULES.get(msg.command, ()):
+            value = getattr(msg, slot)
+            if default is not None and math.isnan(value):
+                setattr(msg, slot, default)
+                continue
+            if not valid(value):
+                ack = mav.MAVLink_command_ack_message(
+                    msg.command, mav.MAV_RESULT_DENIED, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+                )
+                return Verdict(False, f"command {msg.command}: {slot} {value!r} is not {wanted}", ack)
+        return PASS
+
+    def failed(self, msg, exc: BaseException) -> None:
+        """A handler raised on ``msg``: log it once per (type, exception type), count it."""
+        key = (msg.get_type(), type(exc).__name__)
+        self.failures[key] += 1
+        if self.failures[key] == 1:
+            frame = bytes(msg.get_msgbuf() or b"").hex()
+            log.error("GCS link: %s raised %s: %s (frame %s); ignored, the link goes on", key[0], key[1], exc, frame,
+                      exc_info=exc)  # fmt: skip
+
+
+class DatagramFraming:
+    """``conn.recv`` of a UDP connection, such that no frame is parsed across two datagrams.
+
+    Before a new datagram is read, whatever the parser still holds from the last one is offered to
+    it once more (returning no new bytes: a datagram may carry several frames); if that yields
+    nothing, it is an unfinished frame and is dropped."""
+
+    def __init__(self, recv: Callable[..., Any], parser: Any, dropped: Callable[[], Any]) -> None:
+        self._recv = recv
+        self._parser = parser
+        self._dropped = dropped
+        self._offered: int | None = None
+
+    def __call__(self, n: int | None = None):
+        left = self._parser.buf_len()
+        if left and left != self._offered:
+            self._offered = left
+            return b""
+        if left:
+            self._parser.buf = bytearray()
+            self._parser.buf_index = 0
+            self._parser.expected_length = mav.HEADER_LEN_V1 + 2
+            self._dropped()
+        self._offered = None
+        return self._recv(n)
