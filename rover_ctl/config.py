@@ -188,8 +188,16 @@ class EstimatorParams:
     """Innovation gate: a fix whose Mahalanobis distance exceeds this is rejected (EKF3's
     EK3_POS_I_GATE is 5 sigma too)."""
     glitch_reset_s: float = 5.0
-    """Fixes rejected continuously for this long mean the GPS really moved (or dead reckoning
-    drifted): reset the position to the GPS, as EKF3 does past EK3_GLITCH_RAD."""
+    """Fixes rejected continuously for this long while the GPS moves unlike the odometry (the
+    wheels slip, the rover slides or is carried, or dead reckoning drifted through an outage)
+    mean the GPS really moved: reset the position to the GPS."""
+    glitch_max_s: float = 60.0
+    """A GPS jump (a step beyond the gate while fixes were being fused) after which the GPS keeps
+    moving as the odometry does is a glitch: rejected for up to this long, then believed (reset),
+    as EKF3 resets when its dead reckoning no longer knows better."""
+    glitch_innovation_tau_s: float = 1.0
+    """Time constant of the mean of the accepted fixes' innovations: the reference a jump is
+    measured from (a slow drift moves it along, a jump leaves it behind)."""
     attitude_timeout_s: float = 0.5
     """Without ATTITUDE for this long the turn rate comes from the wheel speed difference."""
     max_lag_s: float = 0.5
