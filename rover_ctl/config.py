@@ -245,6 +245,18 @@ class GcsParams:
     """Client: resends of one request before giving up with a timeout error."""
     client_connect_timeout_s: float = 5.0
     """Client: wait this long for the autopilot's HEARTBEAT."""
+    signing_key_path: str = "~/.local/state/rover-ctl/signing.key"
+    """MAVLink 2 signing key (64 hex digits, mode 0600; its timestamp in ``<this>.timestamp``);
+    with a key every GCS frame must be signed (docs/gcs.md, "Signing"); empty = no signing."""
+    require_signing: bool = False
+    """Refuse to run without a signing key, and refuse a SETUP_SIGNING that would disable signing."""
+    signing_setup_from_loopback: bool = False
+    """While no key is set, accept SETUP_SIGNING from 127.0.0.0/8 or ::1 (off: only
+    ``rover-ctl signing setup`` or a holder of the current key can set a key)."""
+    signing_timestamp_save_s: float = 30.0
+    """The signing timestamp is saved this often and on shutdown; a start adds this much to the
+    saved value, so a timestamp is never reused even after a crash (the MAVLink spec asks for at
+    least once a minute)."""
 
 
 @dataclass

@@ -40,6 +40,7 @@ from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
 from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, RoverMode
+from rover_ctl.mavlink.signing import KeyStore
 from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText, VehicleLink, VehicleStatus
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
@@ -175,7 +176,8 @@ class Daemon:
             log.warning("vehicle refused MANUAL mode (result %d): overrides may be ignored", result.result)
         store_path = cfg.gcs.mission_store_path
         store = MissionStore(Path(store_path).expanduser()) if store_path else None
-        self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store)
+        signing = KeyStore(cfg.gcs.signing_key_path) if cfg.gcs.signing_key_path else None
+        self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store, signing=signing)
         if self.log_dir:
             self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog"))
             self.tlogs[-1].attach(self.gcs.conn)

@@ -43,6 +43,7 @@ from rover_ctl.mavlink import commands, params
 from rover_ctl.mavlink.commands import CommandService
 from rover_ctl.mavlink.mission import MissionService
 from rover_ctl.mavlink.params import ConfigParams, ParamService
+from rover_ctl.mavlink.signing import KeyStore, LinkSigning
 from rover_ctl.mavlink.telemetry import Telemetry
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore, StoreError
@@ -129,6 +130,7 @@ class GcsLink:
         params: GcsParams | None = None,
         handlers: AutopilotHandlers | None = None,
         store: MissionStore | None = None,
+        signing: KeyStore | None = None,
     ) -> None:
         self.params = params or GcsParams()
         self.handlers: AutopilotHandlers = handlers or DefaultHandlers()
@@ -147,6 +149,8 @@ class GcsLink:
             autoreconnect=True,
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        self.signing = LinkSigning(self.conn, signing, self.params, notify=lambda text, severity: self.send_statustext(text, severity))
+        """MAVLink 2 signing (rover_ctl.mavlink.signing): with a key in ``signing`` unsigned frames are dropped."""
         mission = self._load_store()
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
         self.telemetry = Telemetry(self.conn, self.params)
@@ -156,6 +160,7 @@ class GcsLink:
             self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
 
     def close(self) -> None:
+        self.signing.close()
         self.conn.close()
 
     # ---------------------------------------------------------------- loop
