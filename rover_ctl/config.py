@@ -251,8 +251,8 @@ class GcsParams:
     require_signing: bool = False
     """Refuse to run without a signing key, and refuse a SETUP_SIGNING that would disable signing."""
     signing_setup_from_loopback: bool = False
-    """While no key is set, accept SETUP_SIGNING from 127.0.0.0/8 or ::1 (off: only
-    ``rover-ctl signing setup`` or a holder of the current key can set a key)."""
+    """While no key is set, accept SETUP_SIGNING if the GCS link is loopback-only (bound to
+    127.0.0.1 or ::1; off: only ``rover-ctl signing setup`` or a key holder can set a key)."""
     signing_timestamp_save_s: float = 30.0
     """The signing timestamp is saved this often and on shutdown; a start adds this much to the
     saved value, so a timestamp is never reused even after a crash (the MAVLink spec asks for at

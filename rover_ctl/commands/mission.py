@@ -43,6 +43,8 @@ def add_parser(subparsers) -> None:
         p.add_argument("--timeout", type=float, default=None, metavar="S",
                        help="give up after this long without an answer (default 5 s)")  # fmt: skip
         p.add_argument("--quiet", action="store_true", help="no progress display")
+        p.add_argument("--signing-key", metavar="PASSPHRASE|@FILE",
+                       help="sign with the MAVLink 2 key of this passphrase, or of @FILE (a key file or a passphrase on its first line)")  # fmt: skip
 
     upload = sub.add_parser("upload", help="upload a mission file (mission, fence, rally) to the autopilot")
     upload.add_argument("file")
@@ -89,8 +91,14 @@ def _client(args: argparse.Namespace):
             raise UserError(f"--timeout {args.timeout:g}: must be positive")
         params.client_connect_timeout_s = args.timeout
         params.client_retries = max(1, round(args.timeout / params.client_retry_s) - 1)
+    from rover_ctl.mavlink.signing import SigningError, client_key
+
     try:
-        return MissionClient(args.connect, params, args.source_system, args.source_component)
+        key = client_key(args.signing_key)
+    except SigningError as exc:
+        raise UserError(str(exc)) from None
+    try:
+        return MissionClient(args.connect, params, args.source_system, args.source_component, signing_key=key)
     except (OSError, ValueError) as exc:
         raise UserError(f"--connect {args.connect}: {exc}") from None
 

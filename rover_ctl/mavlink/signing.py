@@ -14,7 +14,8 @@
   SETUP_SIGNING that would turn signing off. Everything the daemon sends is signed.
 * SETUP_SIGNING (a new key) is accepted only from a holder of the current key (the frame got
   through the signature check), or, while no key is set, only when ``signing_setup_from_loopback``
-  is on and the frame came from 127.0.0.0/8 or ::1. A stranger can neither set nor replace the key.
+  is on and the GCS link is loopback-only (bound to 127.0.0.1 or ::1, or a TCP connection to
+  it). A stranger can neither set nor replace the key.
 
 pymavlink's own ``check_signature`` records a frame's timestamp before comparing its signature,
 so one forged frame with a far-future timestamp would lock a genuine ground station out of its
@@ -28,6 +29,7 @@ import hmac
 import ipaddress
 import logging
 import os
+import socket
 import time
 from pathlib import Path
 from typing import Callable
@@ -162,22 +164,21 @@ class _SigningState(MAVLinkSigning):
             self._on_timestamp()
 
 
-def _peer_host(conn) -> str | None:
-    """The address the last frame came from (UDP), or the TCP peer; None if unknown."""
-    address = getattr(conn, "last_address", None)
-    if address:
-        return address[0]
+def _link_is_local(conn) -> bool:
+    """Only processes on this machine can reach the link: a socket bound to a loopback address
+    (``udpin:127.0.0.1:...``, ``tcpin:127.0.0.1:...``) or a TCP connection to one. pymavlink does
+    not say which peer sent a frame, so the link as a whole must be local; ``udpout`` is not (its
+    socket takes datagrams from anyone)."""
+    sock = getattr(conn, "port", None)
     try:
-        return conn.port.getpeername()[0]
-    except (AttributeError, OSError, IndexError, TypeError):
-        return None
-
-
-def _is_loopback(host: str | None) -> bool:
-    try:
-        return host is not None and ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+        local = ipaddress.ip_address(sock.getsockname()[0])
+        if local.is_loopback:
+            return True
+        if sock.type == socket.SOCK_STREAM:
+            return ipaddress.ip_address(sock.getpeername()[0]).is_loopback
+    except (AttributeError, OSError, ValueError, IndexError, TypeError):
+        pass
+    return False
 
 
 class LinkSigning:
@@ -251,10 +252,9 @@ class LinkSigning:
             trusted = msg.get_signed()  # it passed check_signature: our callback never lets it in unsigned
             why = "not signed with the current key"
         else:
-            host = _peer_host(conn)
-            trusted = self.params.signing_setup_from_loopback and _is_loopback(host)
+            trusted = self.params.signing_setup_from_loopback and _link_is_local(conn)
             why = ("no key is set and gcs.signing_setup_from_loopback is off" if not self.params.signing_setup_from_loopback
-                   else f"no key is set and it came from {host}, not loopback")  # fmt: skip
+                   else "no key is set and the GCS link is not loopback-only")  # fmt: skip
         if not trusted:
             log.warning("GCS link: SETUP_SIGNING refused: %s", why)
             return
