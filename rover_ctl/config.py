@@ -189,8 +189,16 @@ class EstimatorParams:
     """Innovation gate: a fix whose Mahalanobis distance exceeds this is rejected (EKF3's
     EK3_POS_I_GATE is 5 sigma too)."""
     glitch_reset_s: float = 5.0
-    """Fixes rejected continuously for this long mean the GPS really moved (or dead reckoning
-    drifted): reset the position to the GPS, as EKF3 does past EK3_GLITCH_RAD."""
+    """Fixes rejected continuously for this long while the GPS moves unlike the odometry (the
+    wheels slip, the rover slides or is carried, or dead reckoning drifted through an outage)
+    mean the GPS really moved: reset the position to the GPS."""
+    glitch_max_s: float = 60.0
+    """A GPS jump (a step beyond the gate while fixes were being fused) after which the GPS keeps
+    moving as the odometry does is a glitch: rejected for up to this long, then believed (reset),
+    as EKF3 resets when its dead reckoning no longer knows better."""
+    glitch_innovation_tau_s: float = 1.0
+    """Time constant of the mean of the accepted fixes' innovations: the reference a jump is
+    measured from (a slow drift moves it along, a jump leaves it behind)."""
     attitude_timeout_s: float = 0.5
     """Without ATTITUDE for this long the turn rate comes from the wheel speed difference."""
     max_lag_s: float = 0.5
@@ -246,6 +254,18 @@ class GcsParams:
     """Client: resends of one message before giving up with a timeout error (the protocol's 5)."""
     client_connect_timeout_s: float = 5.0
     """Client: wait this long for the autopilot's HEARTBEAT."""
+    signing_key_path: str = "~/.local/state/rover-ctl/signing.key"
+    """MAVLink 2 signing key (64 hex digits, mode 0600; its timestamp in ``<this>.timestamp``);
+    with a key every GCS frame must be signed (docs/gcs.md, "Signing"); empty = no signing."""
+    require_signing: bool = False
+    """Refuse to run without a signing key, and refuse a SETUP_SIGNING that would disable signing."""
+    signing_setup_from_loopback: bool = False
+    """While no key is set, accept SETUP_SIGNING if the GCS link is loopback-only (bound to
+    127.0.0.1 or ::1; off: only ``rover-ctl signing setup`` or a key holder can set a key)."""
+    signing_timestamp_save_s: float = 30.0
+    """The signing timestamp is saved this often and on shutdown; a start adds this much to the
+    saved value, so a timestamp is never reused even after a crash (the MAVLink spec asks for at
+    least once a minute)."""
 
 
 @dataclass

@@ -44,6 +44,7 @@ from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelD
 from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
 from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.signing import KeyStore
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, RoverMode, Severity, mav
@@ -153,7 +154,8 @@ class Daemon:
             log.warning("vehicle refused MANUAL mode (result %d): overrides may be ignored", result.result)
         store_path = cfg.gcs.mission_store_path
         store = MissionStore(Path(store_path).expanduser()) if store_path else None
-        self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store)
+        signing = KeyStore(cfg.gcs.signing_key_path) if cfg.gcs.signing_key_path else None
+        self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store, signing=signing)
         self._apply(self.autopilot.drain())
         if self.log_dir:
             self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog", clock=self.log_clock))

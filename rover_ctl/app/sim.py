@@ -31,10 +31,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +49,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 from rover_ctl.autopilot.executor import NAV_COMMANDS  # noqa: E402
 from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
 from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
+from rover_ctl.mavlink.signing import KeyStore  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
@@ -120,6 +123,10 @@ class SimOptions:
     config_overrides: list[str] = field(default_factory=list)
     sitl_params: list[str] = field(default_factory=list)
     """NAME=VALUE for the emulator's --param (e.g. SIM_GPS_GLITCH_X=5)."""
+    signing_key: bytes | None = None
+    """MAVLink 2 signing key of the GCS link, for the daemon (a key file in a private temporary
+    folder, removed at the end) and this ground station. None: the daemon runs without signing
+    (never with the user's own key)."""
 
 
 @dataclass
@@ -191,6 +198,8 @@ class SimRun:
         so MAVProxy can attach to a running sim with ``--master`` this URL)."""
         self.progress.gcs_url = self.gcs_url
         self.watch_port = free_port(socket.SOCK_DGRAM)
+        self._key_dir: str | None = None
+        """A private temporary folder for the daemon's key file (not the report folder, which is shared)."""
         self._logs: list[Any] = []
         self._last_rx_wall = time.monotonic()
         self._param_ack: dict[str, float] = {}
@@ -201,6 +210,10 @@ class SimRun:
         self._truth = TruthTail(self.out / "truth.jsonl")
 
     # ---- processes -------------------------------------------------------------------------
+
+    @property
+    def signing_key_path(self) -> Path:
+        return Path(self._key_dir or ".") / "signing.key"
 
     def _sitl_flags(self) -> list[str]:
         """The emulator's flags (``sitl.launch`` adds the endpoints)."""
@@ -228,13 +241,16 @@ class SimRun:
         o = self.options
         cmd = [*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{self.vehicle_port}",
                "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-run", str(self.out),
-               "--mission-store", ""]  # fmt: skip
+               "--mission-store", "", "--signing-key-file", str(self.signing_key_path) if self._key_dir else ""]  # fmt: skip
         for item in o.config_overrides:
             cmd += ["--set", item]
         return cmd
 
     def start(self) -> None:
         """Start both children, connect the GCS and the watcher, upload the mission."""
+        if self.options.signing_key is not None:
+            self._key_dir = tempfile.mkdtemp(prefix="rover-ctl-sim-")
+            KeyStore(self.signing_key_path).save_key(self.options.signing_key)
         endpoints = [f"tcpin:127.0.0.1:{self.vehicle_port}", f"udpin:127.0.0.1:{self.watch_port}"]
         try:
             self.sitl = start_sitl(*self._sitl_flags(), endpoints=endpoints, stdout_path=self.out / "sitl.out",
@@ -247,7 +263,7 @@ class SimRun:
         self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        self.gcs = MissionClient(self.gcs_url)
+        self.gcs = MissionClient(self.gcs_url, signing_key=self.options.signing_key)
         deadline = time.monotonic() + GCS_CONNECT_TIMEOUT_S
         while True:
             self._check_children()
@@ -278,6 +294,9 @@ class SimRun:
                 conn.close()
         for handle in self._logs:
             handle.close()
+        if self._key_dir is not None:
+            shutil.rmtree(self._key_dir, ignore_errors=True)
+            self._key_dir = None
 
     def __enter__(self) -> "SimRun":
         try:

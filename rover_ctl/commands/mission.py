@@ -39,6 +39,8 @@ def link_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="give up after this long without an answer (default 5 s)")  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--signing-key", metavar="PASSPHRASE|@FILE",
+                   help="sign with the MAVLink 2 key of this passphrase, or of @FILE (a key file or a passphrase on its first line)")  # fmt: skip
 
 
 def add_parser(subparsers) -> None:
@@ -104,8 +106,14 @@ def _client(args: argparse.Namespace):
         params.client_connect_timeout_s = args.timeout
         params.client_retry_s = args.timeout / (params.client_retries + 1)
         params.client_item_retry_s = min(params.client_item_retry_s, params.client_retry_s)
+    from rover_ctl.mavlink.signing import SigningError, client_key
+
     try:
-        return MissionClient(args.connect, params, args.source_system, args.source_component)
+        key = client_key(args.signing_key)
+    except SigningError as exc:
+        raise UserError(str(exc)) from None
+    try:
+        return MissionClient(args.connect, params, args.source_system, args.source_component, signing_key=key)
     except (OSError, ValueError) as exc:
         raise UserError(f"--connect {args.connect}: {exc}") from None
 

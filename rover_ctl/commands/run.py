@@ -35,6 +35,8 @@ def add_parser(subparsers) -> None:
     logs.add_argument("--log-dir", metavar="DIR", help="each start writes a new numbered run folder here (vehicle.tlog, gcs.tlog, control.csv, events.jsonl) and DIR/latest (default: daemon.log_dir)")
     logs.add_argument("--log-run", metavar="DIR", help="write this run's logs into DIR itself, no numbering (rover-ctl sim, which numbers its own runs)")
     parser.add_argument("--mission-store", metavar="FILE", help="where the uploaded mission persists (default: gcs.mission_store_path; '' for none)")
+    parser.add_argument("--signing-key-file", metavar="FILE", help="MAVLink 2 signing key file (default: gcs.signing_key_path; '' for none; make one with `rover-ctl signing setup`)")
+    parser.add_argument("--require-signing", action="store_true", help="refuse to run without a signing key (gcs.require_signing)")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     parser.set_defaults(func=run)
 
@@ -66,6 +68,10 @@ def run(args: argparse.Namespace) -> int:
         overrides.append(f"link.gcs_url={args.gcs}")
     if args.mission_store is not None:
         overrides.append(f"gcs.mission_store_path={args.mission_store}")
+    if args.signing_key_file is not None:
+        overrides.append(f"gcs.signing_key_path={args.signing_key_file}")
+    if args.require_signing:
+        overrides.append("gcs.require_signing=true")
     try:
         config = load_config(args.config, overrides)
     except ConfigError as exc:
@@ -92,6 +98,14 @@ def run(args: argparse.Namespace) -> int:
     except LogDirError as exc:
         raise UserError(str(exc)) from None
 
+    from rover_ctl.mavlink.signing import KeyStore, SigningError
+
+    try:  # a damaged key file or a required key that is missing: a usage error, before any link opens
+        key = KeyStore(config.gcs.signing_key_path).load_key() if config.gcs.signing_key_path else None
+    except SigningError as exc:
+        raise UserError(str(exc)) from None
+    if config.gcs.require_signing and key is None:
+        raise UserError("--require-signing: no signing key (gcs.signing_key_path); run: rover-ctl signing setup PASSPHRASE")
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",

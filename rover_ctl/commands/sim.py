@@ -34,6 +34,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--json", action="store_true", help="print the metrics JSON on stdout (progress goes to stderr)")
     parser.add_argument("--timeout-s", type=_positive, default=600.0, metavar="S", help="sim-time budget of the mission (default 600)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="daemon config override (repeatable)")
+    parser.add_argument("--signing-key", metavar="PASSPHRASE|@FILE",
+                        help="MAVLink 2 signing on the GCS link: the daemon and this ground station use this key (as `rover-ctl mission`)")  # fmt: skip
     parser.add_argument("--sitl-param", action="append", default=[], metavar="NAME=VALUE", help="emulator parameter, e.g. a SIM_* fault (repeatable)")
     parser.set_defaults(func=run)
 
@@ -54,6 +56,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--obstacles {args.obstacles}: expected a count >= 0")
     if args.world is not None and not args.world.is_file():
         raise UserError(f"--world {args.world}: no such file")
+    from rover_ctl.mavlink.signing import SigningError, client_key
+
+    try:
+        signing_key = client_key(args.signing_key)
+    except SigningError as exc:
+        raise UserError(str(exc)) from None
     budget_mb = load_config(None, args.set).daemon.log_max_total_mb  # also refuses a bad --set now
     try:
         load_mission(args.mission)  # refused before a run folder is made for it
@@ -63,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     options = SimOptions(
         mission=args.mission, out=out, world=args.world, obstacles=args.obstacles, seed=args.seed,
         rulebase=args.rulebase, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
-        timeout_s=args.timeout_s, config_overrides=args.set, sitl_params=args.sitl_param,
+        timeout_s=args.timeout_s, config_overrides=args.set, sitl_params=args.sitl_param, signing_key=signing_key,
     )  # fmt: skip
     console = Console(stderr=args.json)
 

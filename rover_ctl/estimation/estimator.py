@@ -41,11 +41,21 @@ mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF 
 Jacobian costs one 7x7 covariance product per reading, the UKF fifteen sigma points and an angle-
 aware mean, for no accuracy a rover can see.
 
-GPS gating and recovery: a fix is fused only if its innovation's Mahalanobis distance
-``sqrt(y' S^-1 y)`` is within ``gate_sigma``. Rejected fixes leave the filter dead reckoning, so
-its covariance grows and a real drift is soon accepted again; a disagreement sustained for
-``glitch_reset_s`` resets the position to the GPS (EKF3's GLITCH_RAD rule), since then it is more
-likely the filter that is wrong.
+GPS gating and glitches: a fix is fused only if its innovation's Mahalanobis distance
+``sqrt(y' S^-1 y)`` is within ``gate_sigma``. Rejected fixes leave the filter dead reckoning and
+are judged over the run of rejections, by how the GPS moves against the odometry (EKF3 resets to
+the GPS after a timeout; a rover has wheels that say whether it can have moved):
+
+* a jump: the first rejected fix is beyond the gate from the running mean of the accepted
+  innovations (time constant ``glitch_innovation_tau_s``) while fixes were being fused. While
+  the following fixes keep the same offset (the GPS moves as the odometry does) it is a glitch:
+  rejected, for up to ``glitch_max_s``, then believed. A second jump re-anchors the offset;
+* a drift: the disagreement grew gradually (slipping wheels, a slide, a rover carried), arrived
+  after an outage (dead reckoning drifted), or the offset of a jump started to drift: reset to
+  the GPS once it has lasted ``glitch_reset_s``, since then the filter is the likelier wrong.
+
+During a glitch a fix that passes the gate again is fused only if it is nearer the estimate than
+the glitch offset (dead reckoning grows the covariance, which would let the glitch in).
 
 Time: each reading carries vehicle time. ATTITUDE and WHEEL_DISTANCE drive the filter's clock:
 a reading newer than the filter's time predicts the filter forward to it and is then fused. A
@@ -110,6 +120,28 @@ class Pose:
     position_sigma_m: float
     """1-sigma along the worst horizontal axis: sqrt of the largest eigenvalue of cov[:2, :2]."""
     heading_sigma_rad: float
+
+
+@dataclass
+class _Disagreement:
+    """A run of rejected fixes: when it started, the GPS offset from the estimate since its last
+    jump (mean innovation), and since when that offset has been drifting (None: it holds still,
+    a glitch)."""
+
+    start_s: float
+    offset: np.ndarray
+    drifting_since_s: float | None
+    last: np.ndarray
+    """The previous rejected fix's innovation (a second jump is measured from it)."""
+    count: int = 1
+
+    @property
+    def is_jump(self) -> bool:
+        return self.drifting_since_s is None
+
+
+def _mahalanobis2(y: np.ndarray, cov: np.ndarray) -> float:
+    return float((y.T @ np.linalg.solve(cov, y))[0, 0])
 
 
 class _RoverEkf(ExtendedKalmanFilter):
@@ -202,7 +234,9 @@ class PoseEstimator:
         self._last_attitude_s = -math.inf
         self._last_gps_s = -math.inf
         self._gps_fused_s = -math.inf
-        self._rejected_since_s: float | None = None
+        self._disagreement: _Disagreement | None = None
+        self._innovation_mean = np.zeros((2, 1))
+        """Running mean of the accepted fixes' innovations: what a jump is measured from."""
         self._pending_fix: tuple[float, float, float] | None = None  # east, north, sigma
         self._pending_heading: float | None = None
 
@@ -315,19 +349,47 @@ class PoseEstimator:
         r_cov = np.eye(2) * sigma_m * sigma_m
         innovation = z - _HX_POS(self._kf.x)
         s_cov = self._kf.P[:2, :2] + r_cov
-        distance2 = float((innovation.T @ np.linalg.solve(s_cov, innovation))[0, 0])
-        if distance2 <= self.params.gate_sigma**2:
+        distance2 = _mahalanobis2(innovation, s_cov)
+        glitch = self._disagreement
+        if distance2 <= self.params.gate_sigma**2 and not (
+            glitch is not None and glitch.is_jump and _mahalanobis2(innovation - glitch.offset, s_cov) < distance2
+        ):
+            tracking = self._time_s - self._gps_fused_s <= self.params.gps_timeout_s
             self._kf.update(z, _H_POS, _HX_POS, R=r_cov)
-            self._fuse_velocity(r, lag_s)
-            self._rejected_since_s = None
+            self._disagreement = None
+            alpha = 1.0 - math.exp(-(self._time_s - self._gps_fused_s) / self.params.glitch_innovation_tau_s)
+            self._innovation_mean = self._innovation_mean + alpha * (innovation - self._innovation_mean) if tracking else innovation
             self._gps_fused_s = self._time_s
-            return GpsVerdict.ACCEPTED
-        if self._rejected_since_s is None:
-            self._rejected_since_s = r.time_s
-        if r.time_s - self._rejected_since_s < self.params.glitch_reset_s:
-            return GpsVerdict.REJECTED
-        self._reset_position(z, r_cov)
-        return GpsVerdict.RESET
+            verdict = GpsVerdict.ACCEPTED
+        elif self._judge_rejection(r.time_s, innovation, s_cov):
+            self._reset_position(z, r_cov)
+            verdict = GpsVerdict.RESET
+        else:
+            verdict = GpsVerdict.REJECTED
+        self._fuse_velocity(r, lag_s)
+        return verdict
+
+    def _judge_rejection(self, time_s: float, innovation: np.ndarray, s_cov: np.ndarray) -> bool:
+        """Follow a run of rejected fixes (see the module docstring); True: reset to this fix."""
+        p = self.params
+        gate2 = p.gate_sigma**2
+        glitch = self._disagreement
+        if glitch is None:
+            tracking = self._time_s - self._gps_fused_s <= p.gps_timeout_s
+            jump = tracking and _mahalanobis2(innovation - self._innovation_mean, s_cov) > gate2
+            self._disagreement = _Disagreement(time_s, innovation, None if jump else time_s, innovation)
+            return False
+        if _mahalanobis2(innovation - glitch.last, s_cov) > gate2:  # a new jump: re-anchor
+            glitch.offset, glitch.count, glitch.drifting_since_s = innovation, 1, None
+        elif glitch.drifting_since_s is None and _mahalanobis2(innovation - glitch.offset, s_cov) > gate2:
+            glitch.drifting_since_s = time_s  # the GPS moves unlike the odometry
+        elif glitch.drifting_since_s is None:
+            glitch.count += 1
+            glitch.offset = glitch.offset + (innovation - glitch.offset) / glitch.count
+        glitch.last = innovation
+        if glitch.drifting_since_s is not None:
+            return time_s - glitch.drifting_since_s >= p.glitch_reset_s
+        return time_s - glitch.start_s >= p.glitch_max_s
 
     # -------------------------------------------------------------------------------- internals
     def _check_clock(self, time_s: float) -> None:
@@ -338,7 +400,9 @@ class PoseEstimator:
 
     def _fuse_velocity(self, r: GpsFix, lag_s: float) -> None:
         """GPS course and speed over ground as heading and speed measurements, when moving fast
-        enough for the course to mean something (slower, noise dominates both)."""
+        enough for the course to mean something (slower, noise dominates both). Gated on their
+        own, as EKF3 gates velocity apart from position: a position glitch leaves the velocity
+        good, and it keeps the heading and speed honest while the position dead reckons."""
         p = self.params
         if not (math.isfinite(r.course_deg) and math.isfinite(r.speed_mps)) or r.speed_mps < p.gps_course_min_speed_mps:
             return
@@ -351,6 +415,9 @@ class PoseEstimator:
         z = np.array([[wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - x[BIAS]) * lag_s)], [speed_mps]])
         course_sigma = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps)
         r_cov = np.diag([course_sigma**2, p.gps_velocity_sigma_mps**2])
+        innovation = _heading_first_residual(z, _HX_PSI_V(self._kf.x))
+        if _mahalanobis2(innovation, self._kf.P[np.ix_((PSI, V), (PSI, V))] + r_cov) > p.gate_sigma**2:
+            return  # a velocity glitch, or crabbing (a slide) the model has no state for
         self._kf.update(z, _H_PSI_V, _HX_PSI_V, R=r_cov, residual=_heading_first_residual)
         self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
 
@@ -414,5 +481,6 @@ class PoseEstimator:
         self._kf.P[:2, :] = 0.0
         self._kf.P[:, :2] = 0.0
         self._kf.P[:2, :2] = r_cov
-        self._rejected_since_s = None
+        self._disagreement = None
+        self._innovation_mean = np.zeros((2, 1))
         self._gps_fused_s = self._time_s

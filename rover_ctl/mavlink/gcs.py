@@ -55,6 +55,7 @@ from rover_ctl.mavlink.commands import CommandService
 from rover_ctl.mavlink.inbound import Inbound
 from rover_ctl.mavlink.mission import MissionService, item_from_message
 from rover_ctl.mavlink.params import ConfigParams, ParamService
+from rover_ctl.mavlink.signing import KeyStore, LinkSigning
 from rover_ctl.mavlink.telemetry import Telemetry
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore, StoreError
@@ -161,6 +162,7 @@ class GcsLink:
         params: GcsParams | None = None,
         handlers: AutopilotHandlers | None = None,
         store: MissionStore | None = None,
+        signing: KeyStore | None = None,
     ) -> None:
         self.params = params or GcsParams()
         self.handlers: AutopilotHandlers = handlers or DefaultHandlers()
@@ -179,6 +181,8 @@ class GcsLink:
             autoreconnect=True,
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        self.signing = LinkSigning(self.conn, signing, self.params, notify=lambda text, severity: self.send_statustext(text, severity))
+        """MAVLink 2 signing (rover_ctl.mavlink.signing): with a key in ``signing`` unsigned frames are dropped."""
         self.inbound = Inbound(self.params, self.conn)
         mission = self._load_store()
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
@@ -189,6 +193,7 @@ class GcsLink:
             self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
 
     def close(self) -> None:
+        self.signing.close()
         self.conn.close()
 
     # ---------------------------------------------------------------- loop

@@ -36,6 +36,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 from rover_ctl.config import GcsParams  # noqa: E402
 from rover_ctl.mission.model import Mission, MissionItem, MissionType  # noqa: E402
 from rover_ctl.mavlink.mission import item_from_message, item_message, wire_items, with_type  # noqa: E402
+from rover_ctl.mavlink.signing import setup_client_signing  # noqa: E402
 
 Progress = Callable[[MissionType, int, int], None]
 """progress(mission_type, items_done, items_total)"""
@@ -64,6 +65,7 @@ class MissionClient:
         params: GcsParams | None = None,
         source_system: int = 255,
         source_component: int = 190,
+        signing_key: bytes | None = None,
     ) -> None:
         self.url = url
         self.params = params or GcsParams()
@@ -71,6 +73,8 @@ class MissionClient:
             url, source_system=source_system, source_component=source_component, dialect="ardupilotmega"
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        if signing_key is not None:  # an autopilot with a key drops unsigned frames
+            setup_client_signing(self.conn, signing_key)
         self.me = (source_system, source_component)
         self.target: tuple[int, int] | None = None
 

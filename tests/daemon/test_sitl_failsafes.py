@@ -93,11 +93,13 @@ def test_fenced_mission_avoids_the_exclusion_and_a_glitch_breaches_the_fence(tmp
     frame = LocalFrame(mission.home.lat_deg, mission.home.lon_deg)
     fence = mission.fence
     exclusion = Polygon([frame.to_enu(i.x, i.y) for i in fence if i.command == 5002])
-    with SimRun(SimOptions(mission=BOULDER, out=out, world=BOULDER_WORLD, timeout_s=200.0, config_overrides=["failsafe.recovery_s=1.0"])) as run:
+    with SimRun(SimOptions(mission=BOULDER, out=out, world=BOULDER_WORLD, timeout_s=200.0,
+                                config_overrides=["failsafe.recovery_s=1.0", "estimator.glitch_max_s=3.0"])) as run:
         run.arm()
         run.start_mission()
         assert run.wait_for(lambda p: 2 in p.reached or 3 in p.reached, sim_timeout_s=120.0)  # past the exclusion
-        # A 40 m GPS jump west: gated first, then believed (the filter resets): outside the fence.
+        # A 40 m GPS jump west: gated first, then believed once glitch_max_s (shortened here) is
+        # over (the filter resets): outside the fence.
         run.sitl_param("SIM_GPS_GLITCH_Y", -40.0)
         assert said(run, "FS fence breach: hold", sim_timeout_s=20.0)
         collisions = run.progress.collisions

@@ -44,6 +44,9 @@ class Sensors:
     """GPS silent in [start, end)."""
     glitches: list[tuple[float, float, float, float]] = field(default_factory=list)
     """(start, end, east_m, north_m): GPS offset by that much in [start, end)."""
+    slides: list[tuple[float, float, float, float]] = field(default_factory=list)
+    """(start, end, east_mps, north_mps): the ground carries the rover at that velocity in
+    [start, end) and no wheel or gyro sees it (a slide, a ferry, a rover carried)."""
 
 
 @dataclass
@@ -94,6 +97,10 @@ def simulate(
             slip = rng.normal(0.0, s.lateral_slip_per_sqrt_s * math.sqrt(dt), 2)
             east[k] = east[k - 1] + v * dt * math.cos(mid) + slip[0]
             north[k] = north[k - 1] + v * dt * math.sin(mid) + slip[1]
+            for a, b, ve, vn in s.slides:
+                if a <= t - dt < b:
+                    east[k] += ve * dt
+                    north[k] += vn * dt
             heading[k] = wrap_pi(heading[k - 1] + w * dt)
             bias[k] = decay * bias[k - 1] + rng.normal(0.0, s.gps_bias_m * math.sqrt(1.0 - decay * decay), 2)
             wheel_v = s.wheel_scale * v + rng.normal(0.0, s.wheel_speed_sigma_mps)
@@ -111,6 +118,7 @@ def simulate(
             lat, lon = CMAC.to_geodetic(e, n)
             v = speed_mps(t)
             vel = v * np.array([math.cos(heading[k]), math.sin(heading[k])])
+            vel += sum((np.array([ve, vn]) for a, b, ve, vn in s.slides if a <= t < b), np.zeros(2))
             vel += rng.normal(0.0, s.gps_velocity_sigma_mps, 2)
             course_deg = math.degrees(enu_to_compass_rad(math.atan2(vel[1], vel[0])))
             readings.append(

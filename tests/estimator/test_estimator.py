@@ -117,19 +117,71 @@ def test_fifty_metre_gps_jump_is_rejected():
     assert not rec.poses[int(32.9 / 0.02)].gps_ok
 
 
-def test_sustained_disagreement_resets_to_gps():
-    params = EstimatorParams()
+def _truth_error_m(rec, start_s: float, end_s: float) -> np.ndarray:
+    t, err, _ = rec.arrays(0.0)
+    keep = (t >= start_s) & (t < end_s)
+    return np.hypot(err[keep, 0], err[keep, 1])
+
+
+def test_fifty_metre_jump_held_for_thirty_seconds_is_a_glitch():
+    """The GPS jumps 50 m and stays there for 30 s while the rover drives and turns: the GPS keeps
+    moving as the wheels say, so it is a glitch, rejected throughout; the pose stays within 2 m
+    of the truth and is back to its normal error within 10 s of the glitch's end."""
+    glitch = (30.0, 60.0)
+    sensors = Sensors(gps_white_m=0.5, glitches=[(*glitch, 30.0, 40.0)])
+    run = simulate(90.0, lambda t: 1.5, lambda t: 0.15 * math.sin(t / 5.0), seed=21, sensors=sensors)
+    _, rec, verdicts = run_filter(run)
+    in_glitch = [v for t, v in verdicts if glitch[0] <= t < glitch[1]]
+    assert len(in_glitch) == 150 and all(v is GpsVerdict.REJECTED for v in in_glitch)
+    normal_m = float(np.max(_truth_error_m(rec, CONVERGED_S, glitch[0])))
+    assert normal_m < 1.0
+    assert float(np.max(_truth_error_m(rec, glitch[0], glitch[1]))) < 2.0
+    assert float(np.max(_truth_error_m(rec, glitch[1] + 10.0, 90.0))) <= max(normal_m, 0.5)
+    assert all(v is GpsVerdict.ACCEPTED for t, v in verdicts if t >= glitch[1] + 0.5)
+
+
+def test_a_jump_held_longer_than_glitch_max_s_is_believed():
+    params = EstimatorParams(glitch_max_s=10.0)
     sensors = Sensors(gps_white_m=0.5, glitches=[(20.0, 60.0, 30.0, -20.0)])
     run = simulate(40.0, lambda t: 1.0, lambda t: 0.0, seed=4, sensors=sensors)
-    estimator, rec, verdicts = run_filter(run)
+    estimator, rec, verdicts = run_filter(run, PoseEstimator(CMAC, params, TRACK_M))
     resets = [t for t, v in verdicts if v is GpsVerdict.RESET]
     assert resets[0] == 0.0 and len(resets) == 2
-    assert resets[1] == pytest.approx(20.0 + params.glitch_reset_s, abs=0.25)
+    assert resets[1] == pytest.approx(20.0 + params.glitch_max_s, abs=0.25)
     assert all(v is GpsVerdict.REJECTED for t, v in verdicts if 20.0 <= t < resets[1])
     assert all(v is GpsVerdict.ACCEPTED for t, v in verdicts if t > resets[1])
     east, north, _ = run.truth_at(40.0)
     pose = estimator.pose()
     assert math.hypot(pose.east_m - east - 30.0, pose.north_m - north + 20.0) < 1.0
+
+
+def test_motion_the_wheels_do_not_see_is_followed():
+    """The rover slides sideways at 1 m/s for 30 s (the ground carries it; wheels and gyro see
+    nothing): the GPS drifts away from the odometry without a jump, so it is believed after
+    glitch_reset_s of rejection, again and again. Held as a glitch, the pose would be 30 m off."""
+    params = EstimatorParams()
+    sensors = Sensors(gps_white_m=0.5, slides=[(20.0, 50.0, 0.0, 1.0)])
+    run = simulate(60.0, lambda t: 1.0, lambda t: 0.0, seed=7, sensors=sensors)
+    _, rec, verdicts = run_filter(run)
+    resets = [t for t, v in verdicts if v is GpsVerdict.RESET and t > 0.0]
+    assert resets and all(20.0 < t < 50.0 + params.glitch_reset_s + 0.5 for t in resets)
+    # behind by about the slide over a reset period plus the gate, never the whole 30 m slide
+    assert float(np.max(_truth_error_m(rec, 20.0, 60.0))) < 1.0 * (params.glitch_reset_s + 4.0)
+    assert float(np.max(_truth_error_m(rec, 57.0, 60.0))) < 1.0
+
+
+def test_dead_reckoning_drift_through_an_outage_is_reset_when_fixes_return():
+    """During a 20 s outage the rover slides 16 m unseen: the fixes that come back are far outside
+    the gate but did not jump while tracking, so the filter believes them after glitch_reset_s."""
+    params = EstimatorParams()
+    sensors = Sensors(gps_white_m=0.5, outages=[(20.0, 40.0)], slides=[(22.0, 38.0, 1.0, 0.0)])
+    run = simulate(55.0, lambda t: 1.0, lambda t: 0.0, seed=12, sensors=sensors)
+    _, rec, verdicts = run_filter(run)
+    after = [(t, v) for t, v in verdicts if t >= 40.0]
+    assert after[0][1] is GpsVerdict.REJECTED
+    resets = [t for t, v in after if v is GpsVerdict.RESET]
+    assert resets == [pytest.approx(40.0 + params.glitch_reset_s, abs=0.25)]
+    assert float(np.max(_truth_error_m(rec, 46.0, 55.0))) < 1.0
 
 
 def test_ten_second_outage_is_bridged_with_growing_covariance():
