@@ -57,6 +57,21 @@ class LinkParams:
     heartbeat_period_s: float = 1.0
     override_timeout_s: float = 1.0
     """The vehicle's RC override timeout: overrides must be refreshed faster than this."""
+    wheel_left_index: int = 0
+    """WHEEL_DISTANCE.distance[] entry of the left wheel. ArduPilot orders them by encoder
+    instance (WENC, WENC2); its simulated instance 0 is the RIGHT wheel, so a stock ArduPilot SITL
+    rover needs 1 here and 0 in ``wheel_right_index`` (docs/ardupilot.md)."""
+    wheel_right_index: int = 1
+    """WHEEL_DISTANCE.distance[] entry of the right wheel."""
+    wheel_left_sign: float = 1.0
+    """+1, or -1 for an encoder that counts backwards when its wheel rolls forwards."""
+    wheel_right_sign: float = 1.0
+    rangefinders: list[int] = field(default_factory=lambda: [-1])
+    """DISTANCE_SENSOR orientations the rover has. ``[-1]`` (default): learnt from what the vehicle
+    reports during ``rangefinder_discovery_s``; ``[]``: none (GPS-only navigation, avoidance off);
+    otherwise the list, e.g. ``[0, 2, 4, 6]`` (docs/ardupilot.md, "Rangefinders")."""
+    rangefinder_discovery_s: float = 3.0
+    """Vehicle seconds after the first sensor message during which reporting rangefinders are counted."""
 
 
 @dataclass

@@ -22,6 +22,7 @@ vehicle time, so its silence is measured on the wall clock.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -46,6 +47,8 @@ from rover_ctl.mission.store import MissionStore
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
+from rover_ctl.estimation.wheel_map import WheelMapCheck
+from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
 from rover_ctl.app.logs import CsvLog, TlogWriter
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
@@ -111,7 +114,9 @@ class Daemon:
         self.estimator: PoseEstimator | None = None
         self.wheels = WheelController(config.robot.wheel_radius_m, config.wheel_control)
         self.navigator = Navigator(self.rulebase, config.navigator, config.robot.max_wheel_rpm, config.robot.wheel_radius_m)
-        self.failsafes = Failsafes(config.failsafe)
+        # The rangefinder failsafe's required set follows the rule base and the rover's rangefinders
+        # (nothing is required until they are known; arming waits for that).
+        self.failsafes = Failsafes(dataclasses.replace(config.failsafe, required_rangefinders=[]))
         self.decision: FailsafeDecision | None = None
         self.clock_s = 0.0
         """Failsafe clock: vehicle time, carried on by the wall clock while the vehicle is silent."""
@@ -122,6 +127,13 @@ class Daemon:
         self.ranges: dict[int, RangeReading] = {}
         self.proximity = ObstacleMemory(config.proximity, config.robot.footprint_length_m, config.robot.footprint_width_m)
         self._remembered_s: dict[int, float] = {}  # time of the last reading put into the memory, per orientation
+        # Rangefinders: configured, or learnt over link.rangefinder_discovery_s (rover_ctl.navigation.sensors).
+        self.rangefinder_plan: RangefinderPlan | None = None
+        self.sensor_error: str | None = None
+        self.wheel_map = WheelMapCheck(config.robot.track_m)
+        self._discovery_start_s: float | None = None
+        if config.link.rangefinders != [-1]:
+            self._plan_rangefinders(set(config.link.rangefinders))
         self._last_said: str | None = None
         self.battery: Battery | None = None
         # Autopilot state the GCS sees.
@@ -250,14 +262,35 @@ class Daemon:
             fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
             select.select(fds, [], [], self.settings.idle_wait_s)
 
+    def _plan_rangefinders(self, present: set[int]) -> None:
+        try:
+            plan = plan_rangefinders(self.navigator.orientations, present)
+        except SensorSetupError as exc:
+            self.sensor_error = f"Rangefinders: {exc}"
+            log.error("%s", self.sensor_error)
+            return
+        self.rangefinder_plan = self.navigator.rangefinders = plan
+        self.failsafes = Failsafes(dataclasses.replace(self.config.failsafe, required_rangefinders=sorted(plan.required)))
+        self._say(plan.describe(), mav.MAV_SEVERITY_INFO if plan.avoidance else mav.MAV_SEVERITY_WARNING)
+
     def _on_item(self, item: Any) -> None:
+        if self._discovery_start_s is None and isinstance(item, (WheelDistance, Attitude, RangeReading, GpsFix)):
+            self._discovery_start_s = item.time_s
         if isinstance(item, WheelDistance):
             self._rx_perf = time.perf_counter()
+            if self.wheel_map.verdict is None:
+                self.wheel_map.on_wheels(item)
+                if self.wheel_map.verdict == "reversed":
+                    self.sensor_error = "Wheel map reversed: check link.wheel_*_index"
+                    self._say(self.sensor_error, mav.MAV_SEVERITY_CRITICAL)
+                    if self.mode in (RoverMode.AUTO, RoverMode.RTL):
+                        self._enter_mode(int(RoverMode.HOLD))
             self.wheels.on_wheels(item)
             if self.estimator:
                 self.estimator.on_wheels(item)
         elif isinstance(item, Attitude):
             self._rx_perf = time.perf_counter()
+            self.wheel_map.on_attitude(item)
             if self.estimator:
                 self.estimator.on_attitude(item)
         elif isinstance(item, RangeReading):
@@ -320,6 +353,12 @@ class Daemon:
         return VehicleState(armed, self.mode, status, self.home)
 
     def arm(self, arm: bool, force: bool) -> int:
+        if arm and self.sensor_error is not None:
+            self._say(self.sensor_error[:50], mav.MAV_SEVERITY_CRITICAL)
+            return mav.MAV_RESULT_DENIED
+        if arm and self.rangefinder_plan is None and not force:
+            self._say("PreArm: rangefinders not known yet", mav.MAV_SEVERITY_CRITICAL)
+            return mav.MAV_RESULT_TEMPORARILY_REJECTED
         if arm and self.home is None and not force:
             self._say("PreArm: no GPS fix yet", mav.MAV_SEVERITY_CRITICAL)
             return mav.MAV_RESULT_DENIED
@@ -434,6 +473,10 @@ class Daemon:
         self.control_step(t_s, dt_s)
 
     def control_step(self, t_s: float, dt_s: float) -> None:
+        start = self._discovery_start_s
+        if self.rangefinder_plan is None and self.sensor_error is None and start is not None \
+                and t_s >= start + self.config.link.rangefinder_discovery_s:
+            self._plan_rangefinders(set(self.ranges))
         row: dict[str, Any] = dict.fromkeys(CSV_COLUMNS, "")
         pose = self.estimator.pose() if self.estimator and self.estimator.initialised else None
         last = self.link.last_rx_vehicle_s
@@ -478,7 +521,7 @@ class Daemon:
             vehicle_age_s=vehicle_age_s,
             gcs_age_s=math.inf if gcs_seen is None else time.monotonic() - gcs_seen,
             gps_age_s=math.inf if self.last_fix_s is None else max(0.0, t_s - self.last_fix_s),
-            range_ages_s={o: max(0.0, t_s - r.time_s) for o, r in self.ranges.items()},
+            range_ages_s={o: max(0.0, t_s - r.time_s) for o, r in self.ranges.items() if o in self.failsafes.params.required_rangefinders},
             estimator_healthy=pose is not None and pose.healthy,
             inside_fence=position is None or self.planner is None or self.planner.is_inside_fence(position),
             driving=self._driving(),

@@ -361,11 +361,13 @@ class VehicleLink:
             self._advance(msg.time_boot_ms / 1000.0)
             return Attitude(time_s=msg.time_boot_ms / 1000.0, yaw_rad=msg.yaw, yaw_rate_radps=msg.yawspeed)
         if kind == "WHEEL_DISTANCE":
-            if msg.count < 2:
+            p = self.params
+            if msg.count <= max(p.wheel_left_index, p.wheel_right_index):
                 self.garbage_frames += 1
                 return None
             time_s = self._boot_time_s(msg.time_usec)
-            return WheelDistance(time_s=time_s, left_m=msg.distance[0], right_m=msg.distance[1])
+            return WheelDistance(time_s=time_s, left_m=p.wheel_left_sign * msg.distance[p.wheel_left_index],
+                                 right_m=p.wheel_right_sign * msg.distance[p.wheel_right_index])
         if kind == "GPS_RAW_INT":
             self.last_gps_msg = msg
             return dataclasses.replace(decode_gps(msg), time_s=self._boot_time_s(msg.time_usec))
