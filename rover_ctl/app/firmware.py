@@ -53,10 +53,11 @@ WHEEL_ENCODERS = {
 RANGEFINDER_LAYOUTS = {
     "six": (0, 7, 1, 6, 2, 4),
     "paper": (0, 2, 4, 6),
+    "three": (0, 2, 6),
     "none": (),
 }
 """Rangefinder orientations (MAV_SENSOR_ORIENTATION) per named layout: the bundled six, the
-paper's four, none."""
+paper's four, a rover without a back one, none."""
 RANGEFINDER_MAX_M = 4.0
 
 
@@ -170,6 +171,19 @@ class FirmwareRun(SimRun):
         super().stop()
         if self._truth_file is not None and not self._truth_file.closed:
             self._truth_file.close()
+
+    def arm(self, timeout_s: float = 60.0) -> None:
+        """Arm and wait until the daemon's heartbeat says armed: the firmware refuses arming for a
+        few seconds after start ("Arm: Accels inconsistent") while its simulated IMUs settle, after
+        the daemon has already accepted the request; so ask again until it holds."""
+        if not self.wait_for(lambda p: p.position_en is not None, wall_timeout_s=timeout_s):
+            raise SimError(f"no position from the daemon within {timeout_s:g} s: {self.progress.last_text}")
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            if self.wait_for(lambda p: p.armed, wall_timeout_s=2.0):
+                return
+        raise SimError(f"the rover did not arm within {timeout_s:g} s: {self.progress.last_text}")
 
     # ---- watching ----------------------------------------------------------------------------
 

@@ -248,6 +248,8 @@ class VehicleLink:
         self.lockstep_source: tuple[int, int] | None = None
         """(system, component) that announced lockstep; its TIMESYNC requests are frame markers."""
         self.probes_answered = 0
+        self.readings_dropped = 0
+        """Stale sensor readings skipped because newer ones of the same kind came in the same batch."""
         """TIMESYNC requests answered as plain time sync (ArduPilot's latency probe)."""
 
     # ---- receiving -------------------------------------------------------------------------
@@ -285,7 +287,35 @@ class VehicleLink:
                 items.append(item)
                 if stop_at_marker and isinstance(item, FrameMarker):
                     break
+        if self.lockstep_source is None and len(items) > 1:
+            items = self._coalesce(items)
         return items
+
+    def _coalesce(self, items: list[Any]) -> list[Any]:
+        """Outside lockstep, keep only the newest sensor reading of each kind in one batch.
+
+        A vehicle running faster than the daemon can read (a simulator at 50x, or a loop stalled
+        by the machine) leaves a backlog; processing every stale reading makes each loop turn
+        longer and the backlog longer still, and the overrides sent come from ever older data
+        (a rover at 50x ran away). Wheel distances are cumulative and attitude is absolute, so
+        the newest of each loses only resolution. ``readings_dropped`` counts what was skipped."""
+        seen: set[Any] = set()
+        kept: list[Any] = []
+        for item in reversed(items):
+            if isinstance(item, (WheelDistance, Attitude, GpsFix, Truth, Battery)):
+                key: Any = type(item)
+            elif isinstance(item, RangeReading):
+                key = (RangeReading, item.orientation)
+            else:
+                kept.append(item)
+                continue
+            if key in seen:
+                self.readings_dropped += 1
+                continue
+            seen.add(key)
+            kept.append(item)
+        kept.reverse()
+        return kept
 
     def _read(self) -> bool:
         """One read of everything waiting, parsed; False when nothing came (or the link failed)."""
