@@ -52,7 +52,7 @@ class LinkParams:
     gcs_url: str = "udpout:127.0.0.1:14550"
     """pymavlink connection string of the ground-station link."""
     source_system: int = 255
-    """Our system id on the vehicle link; ArduPilot accepts RC overrides only from SYSID_MYGCS (255)."""
+    """Our system id on the vehicle link; ArduPilot accepts RC overrides only from MAV_GCS_SYSID (255; SYSID_MYGCS before Rover 4.7)."""
     source_component: int = 190
     heartbeat_period_s: float = 1.0
     override_timeout_s: float = 1.0
