@@ -53,11 +53,26 @@ class LinkParams:
     gcs_url: str = "udpout:127.0.0.1:14550"
     """pymavlink connection string of the ground-station link."""
     source_system: int = 255
-    """Our system id on the vehicle link; ArduPilot accepts RC overrides only from SYSID_MYGCS (255)."""
+    """Our system id on the vehicle link; ArduPilot accepts RC overrides only from MAV_GCS_SYSID (255; SYSID_MYGCS before Rover 4.7)."""
     source_component: int = 190
     heartbeat_period_s: float = 1.0
     override_timeout_s: float = 1.0
     """The vehicle's RC override timeout: overrides must be refreshed faster than this."""
+    wheel_left_index: int = 0
+    """WHEEL_DISTANCE.distance[] entry of the left wheel. ArduPilot orders them by encoder
+    instance (WENC, WENC2); its simulated instance 0 is the RIGHT wheel, so a stock ArduPilot SITL
+    rover needs 1 here and 0 in ``wheel_right_index`` (docs/ardupilot.md)."""
+    wheel_right_index: int = 1
+    """WHEEL_DISTANCE.distance[] entry of the right wheel."""
+    wheel_left_sign: float = 1.0
+    """+1, or -1 for an encoder that counts backwards when its wheel rolls forwards."""
+    wheel_right_sign: float = 1.0
+    rangefinders: list[int] = field(default_factory=lambda: [-1])
+    """DISTANCE_SENSOR orientations the rover has. ``[-1]`` (default): learnt from what the vehicle
+    reports during ``rangefinder_discovery_s``; ``[]``: none (GPS-only navigation, avoidance off);
+    otherwise the list, e.g. ``[0, 2, 4, 6]`` (docs/ardupilot.md, "Rangefinders")."""
+    rangefinder_discovery_s: float = 3.0
+    """Vehicle seconds after the first sensor message during which reporting rangefinders are counted."""
 
 
 @dataclass
@@ -116,8 +131,6 @@ class FailsafeParams:
     """On GCS loss: "continue" the mission, "hold" or "rtl" (ArduPilot FS_GCS_ENABLE/FS_ACTION)."""
     rangefinder_timeout_s: float = 0.5
     """A rangefinder silent for longer than this is reported so the navigator treats that side as blocked."""
-    required_rangefinders: list[int] = field(default_factory=lambda: [0, 2, 4, 6])
-    """DISTANCE_SENSOR orientations that must report (front, right, back, left: the paper's four)."""
     gps_timeout_s: float = 1.0
     """No GPS fix for longer than this: dead reckoning."""
     dead_reckoning_max_s: float = 20.0

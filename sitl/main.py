@@ -149,6 +149,7 @@ class Emulator:
         self.rover, self.vehicle, self.endpoints, self.clock = rover, vehicle, endpoints, clock
         self.controller = endpoints[0]
         self.lockstep = lockstep
+        vehicle.lockstep = lockstep
         self.pacer = Pacer(speedup)
         self.marker = LockstepMarker()
         self.truth = truth

@@ -36,6 +36,9 @@ STEERING_CHANNEL = 0
 THROTTLE_CHANNEL = 2
 """Zero-based RC channel indexes: ch1 steering, ch3 throttle (ArduPilot Rover defaults)."""
 STATUSTEXT_MAX_CHARS = 50
+LOCKSTEP_ANNOUNCEMENT = b"lockstep"
+"""AUTOPILOT_VERSION.flight_custom_version in lockstep: tells a controller that this vehicle's
+TIMESYNC requests are end-of-frame markers (docs/architecture.md, "Lockstep handshake")."""
 PARAM_ID_CHARS = 16
 """MAVLink param_id length; every parameter name here fits (a test checks it)."""
 
@@ -113,6 +116,8 @@ class MavlinkVehicle:
         self.sensor_next_s = dict.fromkeys(self.sensor_periods_s, 0.0)
         self.gps = self.attitude = self.wheels = None
         self.ranges: list = []
+        self.lockstep = False
+        """Announced in AUTOPILOT_VERSION (set by the main loop in --lockstep)."""
 
     # ---- parameters -------------------------------------------------------------------
     def param_names(self) -> list[str]:
@@ -249,9 +254,10 @@ class MavlinkVehicle:
 
     def _request_message(self, msg_id: int, t_s: float) -> list | None:
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            custom = list(LOCKSTEP_ANNOUNCEMENT) if self.lockstep else [0] * 8
             return [mavlink.MAVLink_autopilot_version_message(
                 mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT,
-                0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)]
+                0, 0, 0, 0, custom, [0] * 8, [0] * 8, 0, 0, 0)]
         name = mavlink.mavlink_map[msg_id].msgname if msg_id in mavlink.mavlink_map else None
         builder = self.builders.get(name)
         return builder(t_s) if builder else None

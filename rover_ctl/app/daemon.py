@@ -240,6 +240,7 @@ class Daemon:
                 self.estimator.on_wheels(item)
         elif isinstance(item, Attitude):
             self._rx_perf = time.perf_counter()
+            self.autopilot.on_attitude(item)
             if self.estimator:
                 self.estimator.on_attitude(item)
         elif isinstance(item, RangeReading):

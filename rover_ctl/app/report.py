@@ -154,6 +154,9 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
     latency = c.get("latency_ms", np.array([]))
     latency = latency[np.isfinite(latency)]
     collisions = len(run.collisions)
+    steps = t[active]
+    # The control loop's rate against vehicle time: outside lockstep it can fall behind the vehicle.
+    span_s = float(steps[-1] - steps[0]) if steps.size > 1 else math.nan
     return {
         "success": bool(complete and collisions == 0 and not timed_out),
         "complete": complete,
@@ -168,6 +171,8 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
         "gps_rmse_m": round(_rms(np.array(gps_err)), 3),
         "gps_bias_rms_m": round(_rms(np.array(gps_bias)), 3),
         "heading_rmse_deg": round(math.degrees(_rms(heading_err)), 2),
+        "control_rate_hz": round((steps.size - 1) / span_s, 2) if span_s > 0 else math.nan,
+        "control_gap_max_s": round(float(np.max(np.diff(steps))), 3) if steps.size > 1 else math.nan,
         "loop_latency_p99_ms": round(float(np.percentile(latency, 99)), 3) if latency.size else math.nan,
         "waypoints_reached": len(reached),
         "waypoints_total": totals[-1] if totals else 0,

@@ -7,13 +7,21 @@ come in as values, and what to do goes out as a command and typed events
 Inputs, from the shell:
     set_home(home, frame)        the first GPS fix: the local frame the mission is placed in
     on_vehicle(armed)            the vehicle's HEARTBEAT armed flag (the truth about arming)
-    on_wheels(WheelDistance)     every wheel reading (the wheel-speed meter of the PI loop)
+    on_wheels(WheelDistance)     every wheel reading (the wheel-speed meter of the PI loop, the
+                                 wheel-map check)
+    on_attitude(Attitude)        every ATTITUDE (the wheel-map check's gyro)
     step(t_s, pose, Readings)    at each control tick -> StepOutput(command, events, log_row)
 Ground-station requests (each decides at once and returns a ``Reply``: MAV_RESULT and reason;
 its events, the refusal STATUSTEXT among them, are collected with ``drain()``):
     arm(arm, force), set_mode(custom_mode), mission_start(), return_to_launch(),
     set_current(seq), mission_changed(mission, mission_type), guided_target(lat, lon, change_mode)
 State for the heartbeat and MISSION_CURRENT: ``state()``.
+
+Sensors as data: which rangefinders the rover has is configured (``link.rangefinders``) or learnt
+from the orientations reported in the first ``link.rangefinder_discovery_s`` of sensor data; the
+plan (``rover_ctl.navigation.sensors``) sets what the navigator reads and what the rangefinder
+failsafe requires, and arming waits for it. A rule base the rover cannot serve, or a wheel map the
+gyro contradicts (``rover_ctl.estimation.wheel_map``), refuses arming and stops a driving mode.
 
 One step: failsafes (``Failsafes``, on the failsafe clock: vehicle time, never going back) ->
 mode -> goal (AUTO/RTL: the mission executor; GUIDED: the guided target; LOITER: the station)
@@ -39,12 +47,14 @@ from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInput
 from rover_ctl.config import Config
 from rover_ctl.estimation.estimator import Pose
 from rover_ctl.estimation.frame import LocalFrame
-from rover_ctl.estimation.readings import RangeReading, WheelDistance
+from rover_ctl.estimation.readings import Attitude, RangeReading, WheelDistance
+from rover_ctl.estimation.wheel_map import WheelMapCheck
 from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
+from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
 
@@ -158,6 +168,13 @@ class Autopilot:
         self._station_en: EN | None = None  # LOITER / GUIDED: the point held
         self._guided_target_en: EN | None = None  # GUIDED: still driving to it
         self._returning = False  # station keeping: driving back to the station
+        self.rangefinder_plan: RangefinderPlan | None = None
+        self.sensor_error: str | None = None
+        """Why the rover cannot be driven (rule base vs rangefinders, reversed wheel map)."""
+        self.wheel_map = WheelMapCheck(robot.track_m)
+        self._sensors_since_s: float | None = None  # vehicle time of the first sensor reading
+        if config.link.rangefinders != [-1]:
+            self._plan_rangefinders(set(config.link.rangefinders))
 
     # ---- inputs from the shell -------------------------------------------------------------------
 
@@ -170,7 +187,23 @@ class Autopilot:
         self.armed = armed
 
     def on_wheels(self, reading: WheelDistance) -> None:
+        self._sensor_seen(reading.time_s)
         self.wheels.on_wheels(reading)
+        if self.wheel_map.verdict is None:
+            self.wheel_map.on_wheels(reading)
+            if self.wheel_map.verdict == "reversed":
+                self.sensor_error = "wheel map reversed: check link.wheel_*_index"
+                self._say(self.sensor_error, Severity.CRITICAL)
+                if self.mode in modes.DRIVING_MODES:
+                    self._enter(RoverMode.HOLD, "wheel map")
+
+    def on_attitude(self, reading: Attitude) -> None:
+        self._sensor_seen(reading.time_s)
+        self.wheel_map.on_attitude(reading)
+
+    def _sensor_seen(self, t_s: float) -> None:
+        if self._sensors_since_s is None:
+            self._sensors_since_s = t_s
 
     def drain(self) -> list[Event]:
         """Events of the requests since the last step or drain, in order."""
@@ -183,6 +216,12 @@ class Autopilot:
     def arm(self, arm: bool, force: bool = False) -> Reply:
         if arm and self.armed:
             return ACCEPTED
+        if arm and self.sensor_error is not None:  # not even forced: the rover cannot be driven
+            self._say(f"PreArm: {self.sensor_error}", Severity.CRITICAL)
+            return Reply(mav.MAV_RESULT_DENIED, self.sensor_error)
+        if arm and self.rangefinder_plan is None and not force:
+            self._say("PreArm: rangefinders not known yet", Severity.CRITICAL)
+            return Reply(mav.MAV_RESULT_TEMPORARILY_REJECTED, "rangefinders not known yet")
         if arm and not force:
             failed = prearm.failures(self._arming_inputs())
             if failed:
@@ -307,6 +346,12 @@ class Autopilot:
             dt_s = max(t_s - self._last_step_s, 1e-3)
         self._last_step_s = t_s
         self._pose, self._ranges = pose, readings.ranges
+        if readings.ranges:
+            self._sensor_seen(min(r.time_s for r in readings.ranges.values()))
+        since = self._sensors_since_s
+        if self.rangefinder_plan is None and self.sensor_error is None and since is not None \
+                and t_s >= since + self.config.link.rangefinder_discovery_s:  # fmt: skip
+            self._plan_rangefinders(set(readings.ranges))
         decision = self._failsafe(t_s, pose, readings)
         row: dict[str, Any] = dict.fromkeys(LOG_COLUMNS, "")
         row.update(t_s=t_s, mode=int(self.mode), armed=int(self.armed), failsafe="+".join(decision.reasons))
@@ -523,13 +568,25 @@ class Autopilot:
             position_en=position,
             estimator_healthy=pose is not None and pose.healthy,
             range_ages_s={o: max(0.0, last - r.time_s) for o, r in self._ranges.items()},
-            needed_orientations=self.navigator.orientations,
+            needed_orientations=sorted(self.rangefinder_plan.required) if self.rangefinder_plan else self.navigator.orientations,
             rangefinder_timeout_s=self.config.failsafe.rangefinder_timeout_s,
             fence=self.fence,
             fence_error=self.fence_error,
             first_waypoint_en=self.frame.to_enu(first.x, first.y) if first is not None and self.frame is not None else None,
             max_distance_m=self.config.autopilot.arming_max_distance_m,
         )
+
+    def _plan_rangefinders(self, present: set[int]) -> None:
+        """What the navigator reads and the failsafe requires, from the rangefinders ``present``."""
+        try:
+            plan = plan_rangefinders(self.navigator.orientations, present)
+        except SensorSetupError as exc:
+            self.sensor_error = f"rangefinders: {exc}"
+            self._say(self.sensor_error, Severity.CRITICAL)
+            return
+        self.rangefinder_plan = self.navigator.rangefinders = plan
+        self.failsafes.required_rangefinders = plan.required
+        self._say(plan.describe(), Severity.INFO if plan.avoidance else Severity.WARNING)
 
     # ---- STATUSTEXT ----------------------------------------------------------------------------
 

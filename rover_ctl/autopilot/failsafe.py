@@ -129,6 +129,9 @@ class Failsafes:
         if params.fence_action not in FENCE_ACTIONS:
             raise ValueError(f"failsafe.fence_action: {params.fence_action!r} is not one of {', '.join(FENCE_ACTIONS)}")
         self.params = params
+        self.required_rangefinders: frozenset[int] = frozenset()
+        """Orientations that must report: the rangefinder plan's (``rover_ctl.navigation.sensors``),
+        set by the autopilot once the rover's rangefinders are known; others are not watched."""
         r = params.recovery_s
         self._vehicle = _Latch(0.0, r)
         self._gcs = _Latch(0.0, r)
@@ -169,7 +172,8 @@ class Failsafes:
         fence_action = FENCE_ACTIONS[p.fence_action]
         check(self._fence, "fence breach", not inputs.inside_fence, fence_action, p.fence_action)
 
-        ages = {o: math.inf for o in p.required_rangefinders} | dict(inputs.range_ages_s)
+        required = self.required_rangefinders
+        ages = {o: math.inf for o in required} | {o: a for o, a in inputs.range_ages_s.items() if o in required}
         for orientation in sorted(ages):
             rf = self._ranges.setdefault(orientation, _Latch(0.0, p.recovery_s))
             silent = ages[orientation] > p.rangefinder_timeout_s

@@ -3,13 +3,26 @@
 It owns one pymavlink connection (serial, udp or tcp connection string) and does four jobs:
 
 * identify itself as a ground station (HEARTBEAT as MAV_TYPE_GCS with the system id the vehicle
-  accepts RC overrides from, SYSID_MYGCS = 255 by default) and find the vehicle's heartbeat;
+  accepts RC overrides from, ArduPilot's MAV_GCS_SYSID, formerly SYSID_MYGCS, 255 by default),
+  find the vehicle's heartbeat and ask for its AUTOPILOT_VERSION (which tells rover-sitl in
+  lockstep from anything else, see "Time sync" below);
 * ask for the message rates the daemon needs: SET_MESSAGE_INTERVAL per message, and
   REQUEST_DATA_STREAM(EXTRA1) because ArduPilot only sends WHEEL_DISTANCE in that stream;
 * decode what arrives into typed items (``rover_ctl.estimation.readings`` for sensors, the small classes
-  below for the rest); frames that fail to parse are counted and dropped;
+  below for the rest); frames that fail to parse are counted and dropped. Input is read in whole
+  buffers (one system call for everything waiting) and parsed with pymavlink's parser: its
+  ``recv_msg`` makes a system call per message (a few per message on TCP), which at 10x-50x
+  speed-up was most of the loop's time;
 * send commands: COMMAND_LONG with COMMAND_ACK (asynchronous with retries, or blocking for
   start-up), RC_CHANNELS_OVERRIDE and the lockstep TIMESYNC answers.
+
+Time sync. Every TIMESYNC request (tc1 == 0) is answered as the MAVLink spec asks,
+TIMESYNC(tc1 = our clock in ns, ts1 echoed): ArduPilot sends one every 10 s on each port as a latency
+probe, and that is all it is. Only a vehicle that announced lockstep (AUTOPILOT_VERSION with
+``flight_custom_version == b"lockstep"``, which rover-sitl --lockstep sends) has its requests
+taken as end-of-frame markers, and only those from the system and component that announced it:
+they become ``FrameMarker`` items, answered by the daemon after its control step for that frame
+(docs/architecture.md, "Lockstep handshake"). The answer is the same message either way.
 
 SIMSTATE (the emulator's ground truth) is decoded into ``Truth`` for evaluation only; the daemon
 never navigates on it. Times in decoded items are vehicle time; the wall clock is used only for
@@ -19,6 +32,7 @@ link housekeeping (heartbeats, command retries, silence detection).
 from __future__ import annotations
 
 import dataclasses
+from collections import deque
 import math
 import os
 import select
@@ -42,6 +56,11 @@ EPOCH_THRESHOLD_US = 10**15
 spec lets the receiver tell the two apart by magnitude."""
 RANGE_CAPPED_CM = 65535
 """What rangefinders report for "nothing seen"; 0 is also used while a sensor starts."""
+LOCKSTEP_ANNOUNCEMENT = b"lockstep"
+"""AUTOPILOT_VERSION.flight_custom_version of a vehicle whose TIMESYNC requests are lockstep frame
+markers (rover-sitl --lockstep; ArduPilot puts the first 8 bytes of its git hash there)."""
+READ_SIZE_BYTES = 65536
+"""Largest read from the connection at once (a UDP datagram is at most this)."""
 
 
 class LinkError(RuntimeError):
@@ -70,8 +89,18 @@ class Truth:
 
 
 @dataclass(frozen=True)
+class VehicleVersion:
+    """The vehicle's AUTOPILOT_VERSION (asked for once its heartbeat is seen)."""
+
+    flight_sw_version: int
+    custom_version: bytes
+    lockstep: bool
+    """The vehicle announced lockstep: its TIMESYNC requests are frame markers."""
+
+
+@dataclass(frozen=True)
 class FrameMarker:
-    """A lockstep end-of-frame marker: TIMESYNC with tc1 == 0 from the vehicle."""
+    """A lockstep end-of-frame marker: TIMESYNC with tc1 == 0 from a vehicle that announced lockstep."""
 
     time_s: float
     ts1_ns: int
@@ -214,6 +243,14 @@ class VehicleLink:
         self._next_heartbeat_s = 0.0
         self._pending: dict[int, _Pending] = {}
         self._held: list[Any] = []
+        self._parsed: deque[Any] = deque()  # messages read but not decoded yet (a read can span frames)
+        self.version: VehicleVersion | None = None
+        self.lockstep_source: tuple[int, int] | None = None
+        """(system, component) that announced lockstep; its TIMESYNC requests are frame markers."""
+        self.probes_answered = 0
+        self.readings_dropped = 0
+        """Stale sensor readings skipped because newer ones of the same kind came in the same batch."""
+        """TIMESYNC requests answered as plain time sync (ArduPilot's latency probe)."""
 
     # ---- receiving -------------------------------------------------------------------------
 
@@ -239,24 +276,75 @@ class VehicleLink:
         items, self._held = self._held, []
         if self.link_error is not None and self._wall() < self._retry_wall_s:
             return items
-        for _ in range(max_frames):
-            try:
-                msg = self.conn.recv_msg()
-            except OSError as exc:  # the connection itself failed (peer gone, port vanished)
-                self._down(exc)
+        decoded = 0
+        while decoded < max_frames:
+            if not self._parsed and not self._read():
                 break
-            except Exception:  # a frame pymavlink could not unpack
-                self.garbage_frames += 1
-                continue
-            if msg is None:
-                break
-            self.link_error = None
+            msg = self._parsed.popleft()
+            decoded += 1
             item = self._decode(msg)
             if item is not None:
                 items.append(item)
                 if stop_at_marker and isinstance(item, FrameMarker):
                     break
+        if self.lockstep_source is None and len(items) > 1:
+            items = self._coalesce(items)
         return items
+
+    def _coalesce(self, items: list[Any]) -> list[Any]:
+        """Outside lockstep, keep only the newest sensor reading of each kind in one batch.
+
+        A vehicle running faster than the daemon can read (a simulator at 50x, or a loop stalled
+        by the machine) leaves a backlog; processing every stale reading makes each loop turn
+        longer and the backlog longer still, and the overrides sent come from ever older data
+        (a rover at 50x ran away). Wheel distances are cumulative and attitude is absolute, so
+        the newest of each loses only resolution. ``readings_dropped`` counts what was skipped."""
+        seen: set[Any] = set()
+        kept: list[Any] = []
+        for item in reversed(items):
+            if isinstance(item, (WheelDistance, Attitude, GpsFix, Truth, Battery)):
+                key: Any = type(item)
+            elif isinstance(item, RangeReading):
+                key = (RangeReading, item.orientation)
+            else:
+                kept.append(item)
+                continue
+            if key in seen:
+                self.readings_dropped += 1
+                continue
+            seen.add(key)
+            kept.append(item)
+        kept.reverse()
+        return kept
+
+    def _read(self) -> bool:
+        """One read of everything waiting, parsed; False when nothing came (or the link failed)."""
+        conn = self.conn
+        try:
+            data = conn.recv(READ_SIZE_BYTES)
+        except OSError as exc:  # the connection itself failed (peer gone, port vanished)
+            self._down(exc)
+            return False
+        if not data:
+            return False
+        self.link_error = None
+        data = bytes(data) if not isinstance(data, bytes) else data
+        if conn.first_byte:
+            conn.auto_mavlink_version(data)
+        chunk = data
+        for _ in range(len(data) + 1):  # bounded: each round consumes bytes or ends
+            try:
+                msg = conn.mav.parse_char(chunk)
+            except Exception:  # a frame pymavlink could not unpack
+                self.garbage_frames += 1
+                chunk = b""
+                continue
+            chunk = b""
+            if msg is None:
+                break
+            conn.post_message(msg)  # pymavlink's bookkeeping and message hooks (the tlog)
+            self._parsed.append(msg)
+        return True
 
     def _down(self, exc: OSError) -> None:
         self.link_error = str(exc) or type(exc).__name__
@@ -273,18 +361,25 @@ class VehicleLink:
             return None  # another system on a shared link (a second GCS, a companion computer)
         self.frames_received += 1
         if kind == "TIMESYNC":
-            # Lockstep markers keep coming from an emulator whose vehicle side went quiet: they
-            # advance time but are not a sign of life of the vehicle.
-            if msg.tc1 == 0:
+            if msg.tc1 != 0:
+                return None  # a response: we send no requests of our own
+            if self.lockstep_source == (msg.get_srcSystem(), msg.get_srcComponent()):
+                # Lockstep markers keep coming from an emulator whose vehicle side went quiet:
+                # they advance time but are not a sign of life of the vehicle.
                 self._advance(msg.ts1 / 1e9, alive=False)
                 return FrameMarker(time_s=msg.ts1 / 1e9, ts1_ns=msg.ts1)
+            self._answer_timesync(msg.ts1)
+            self.probes_answered += 1
             return None
         self.last_rx_wall_s = self._wall()
         self.last_rx_vehicle_s = self.vehicle_time_s
         if kind == "HEARTBEAT":
             if msg.type == mavlink.MAV_TYPE_GCS or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
                 return None  # a ground station or a peripheral component, not the autopilot
+            first = self.vehicle is None
             self.target_system, self.target_component = msg.get_srcSystem(), msg.get_srcComponent()
+            if first:
+                self.command_async(mavlink.MAV_CMD_REQUEST_MESSAGE, float(mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION))
             self.vehicle = VehicleStatus(
                 wall_s=self.last_rx_wall_s,
                 armed=bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED),
@@ -296,11 +391,13 @@ class VehicleLink:
             self._advance(msg.time_boot_ms / 1000.0)
             return Attitude(time_s=msg.time_boot_ms / 1000.0, yaw_rad=msg.yaw, yaw_rate_radps=msg.yawspeed)
         if kind == "WHEEL_DISTANCE":
-            if msg.count < 2:
+            p = self.params
+            if msg.count <= max(p.wheel_left_index, p.wheel_right_index):
                 self.garbage_frames += 1
                 return None
             time_s = self._boot_time_s(msg.time_usec)
-            return WheelDistance(time_s=time_s, left_m=msg.distance[0], right_m=msg.distance[1])
+            return WheelDistance(time_s=time_s, left_m=p.wheel_left_sign * msg.distance[p.wheel_left_index],
+                                 right_m=p.wheel_right_sign * msg.distance[p.wheel_right_index])
         if kind == "GPS_RAW_INT":
             self.last_gps_msg = msg
             return dataclasses.replace(decode_gps(msg), time_s=self._boot_time_s(msg.time_usec))
@@ -315,7 +412,18 @@ class VehicleLink:
             return StatusText(self.vehicle_time_s, msg.severity, msg.text)
         if kind == "COMMAND_ACK":
             return self._on_ack(msg)
+        if kind == "AUTOPILOT_VERSION":
+            return self._on_version(msg)
         return None
+
+    def _on_version(self, msg: Any) -> VehicleVersion | None:
+        if self.vehicle is None or msg.get_srcComponent() != self.target_component:
+            return None
+        custom = bytes(msg.flight_custom_version)
+        lockstep = custom == LOCKSTEP_ANNOUNCEMENT
+        self.lockstep_source = (msg.get_srcSystem(), msg.get_srcComponent()) if lockstep else None
+        self.version = VehicleVersion(msg.flight_sw_version, custom, lockstep)
+        return self.version
 
     def _boot_time_s(self, time_usec: int) -> float:
         """Vehicle (boot) time of a time_usec field: epoch stamps (a real GPS) are replaced by the
@@ -363,7 +471,11 @@ class VehicleLink:
 
     def answer_marker(self, marker: FrameMarker) -> None:
         """Answer a lockstep marker: the vehicle may advance to the next frame."""
-        self.conn.mav.timesync_send(int(self._wall() * 1e9), marker.ts1_ns)
+        self._answer_timesync(marker.ts1_ns)
+
+    def _answer_timesync(self, ts1_ns: int) -> None:
+        """TIMESYNC response: tc1 = our clock in ns (never 0, which would read as a request), ts1 echoed."""
+        self.conn.mav.timesync_send(max(1, int(self._wall() * 1e9)), ts1_ns)
 
     def request_streams(self, rates_hz: dict[str, float], extra1_hz: float) -> None:
         """Ask for message rates (the vehicle sends what it can, we cope). EXTRA1 first: on

@@ -15,6 +15,11 @@ Pure: no clock, no I/O. Each ``step`` maps the geometry onto the rule base's inp
 ``NavigatorParams.missing_range_m`` (0 by default): that side counts as blocked.** The daemon's
 rangefinder failsafe relies on this; a rule base that has no input for a side ignores it.
 
+Which rangefinders the rover has is ``rangefinders`` (a ``rover_ctl.navigation.sensors.
+RangefinderPlan``, set by the daemon once known): without rangefinders every obstacle input reads
+clear (GPS-only navigation); a missing diagonal reads the nearer of its front and side
+neighbours. Until it is set, the ranges are read as passed.
+
 The outputs ``left_motor`` and ``right_motor`` are scaled so that the rule base's largest output
 peak becomes ``max_wheel_rpm``; with a speed limit both wheels are scaled down together
 (keeping the turn radius) so that neither exceeds the wheel rpm of that ground speed.
@@ -27,6 +32,7 @@ from dataclasses import dataclass, field
 
 from rover_ctl.config import NavigatorParams, RobotParams
 from rover_ctl.fuzzy import RuleBase, RuleBaseError, load_rulebase
+from rover_ctl.navigation.sensors import RangefinderPlan
 
 SIDES = {"front": 0, "front_right": 1, "right": 2, "back": 4, "left": 6, "front_left": 7}
 """Obstacle input suffix -> MAV_SENSOR_ORIENTATION of the rangefinder that feeds it."""
@@ -75,6 +81,8 @@ class Navigator:
                 self._obstacles.append((variable.name, SIDES[variable.name.removeprefix("obstacle_")], scale))
         full_scale = max(abs(s.peak) for name in OUTPUTS for s in self.rulebase.outputs[self.rulebase.output_names.index(name)].sets)
         self._rpm_per_output = max_wheel_rpm / full_scale
+        self.rangefinders: RangefinderPlan | None = None
+        """How the rover's rangefinders feed the obstacle inputs (None: as passed)."""
 
     @property
     def orientations(self) -> list[int]:
@@ -102,6 +110,8 @@ class Navigator:
         relative_rad = math.remainder(math.atan2(d_north, d_east) - heading_rad, math.tau) if steer_m > 0.0 else 0.0
         distance_m = steer_m if target_distance_m is None else max(target_distance_m, 0.0)
         inputs = {"target_distance": distance_m, "target_direction": math.degrees(relative_rad) % 360.0}
+        if self.rangefinders is not None:
+            ranges_m = self.rangefinders.inputs(ranges_m, self.orientations)
         for name, orientation, scale in self._obstacles:
             range_m = ranges_m.get(orientation, math.nan)
             if range_m is None or math.isnan(range_m):

@@ -49,9 +49,16 @@ def pose(east_m: float = 0.0, north_m: float = 0.0, heading_rad: float = math.pi
     return Pose(t_s, east_m, north_m, heading_rad, speed_mps, 0.0, np.eye(3) * 0.01, healthy, True, 0.1, 0.05)
 
 
+def rover_config() -> Config:
+    """The default config on a rover whose rangefinders are configured (not learnt first)."""
+    config = Config()
+    config.link.rangefinders = list(ORIENTATIONS)
+    return config
+
+
 @dataclass
 class Bench:
-    config: Config = field(default_factory=Config)
+    config: Config = field(default_factory=rover_config)
     east_m: float = 0.0
     north_m: float = 0.0
     heading_rad: float = math.pi / 2
@@ -71,10 +78,14 @@ class Bench:
 
     def __post_init__(self) -> None:
         self.autopilot = Autopilot(self.config, RULEBASE)
+        self.startup = self.autopilot.drain()
+        """What the autopilot emitted when built; its texts (the rangefinder plan) are kept out of
+        ``events`` so tests read the texts their own actions caused."""
         self.left_mps = self.right_mps = 0.0
         self.left_m = self.right_m = 0.0
         self.armed = False
         self._ranges: dict[int, RangeReading] = {}
+        self.events.extend(e for e in self.startup if not isinstance(e, StatusText))
 
     # -- the world --------------------------------------------------------------------------
 

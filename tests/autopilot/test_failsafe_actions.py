@@ -13,12 +13,13 @@ from autopilot.harness import Bench, mission, waypoint
 from rover_ctl.autopilot.events import FailsafeChanged, ModeChanged, StatusText
 from rover_ctl.autopilot.failsafe import Action
 from rover_ctl.config import Config
+from autopilot.harness import rover_config
 from rover_ctl.mission.model import Mission
 from rover_ctl.vocabulary import Cmd, RoverMode, Severity, mav
 
 
 def driving(config: Config | None = None, points=((0.0, 40.0),), fence=None) -> Bench:
-    bench = Bench(config or Config())
+    bench = Bench(config or rover_config())
     bench.ready(mission(*points, fence=fence))
     assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
     bench.run(4.0)
@@ -48,7 +49,7 @@ def test_vehicle_link_silent_sends_neutral_and_resumes():
 
 @pytest.mark.parametrize("gcs_action, expected", [("continue", Action.NONE), ("hold", Action.HOLD), ("rtl", Action.RTL)])
 def test_gcs_loss_actions(gcs_action, expected):
-    config = Config()
+    config = rover_config()
     config.failsafe.gcs_action = gcs_action
     bench = driving(config)
     bench.gcs_age_s = 0.5
@@ -85,7 +86,7 @@ def square(half_m: float, command: int = Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION)
 
 @pytest.mark.parametrize("fence_action", ["hold", "rtl"])
 def test_fence_breach(fence_action):
-    config = Config()
+    config = rover_config()
     config.failsafe.fence_action = fence_action
     bench = driving(config, fence=square(50.0))
     bench.north_m = 51.0  # a GPS jump puts the estimate outside the inclusion fence
@@ -102,7 +103,7 @@ def test_fence_breach(fence_action):
 
 
 def test_gps_loss_dead_reckons_then_holds():
-    config = Config()
+    config = rover_config()
     config.failsafe.dead_reckoning_max_s = 3.0
     bench = driving(config)
     bench.gps_age_s = config.failsafe.gps_timeout_s + 0.1
@@ -164,7 +165,7 @@ def test_stuck_backs_off_then_replans_around_the_spot_ahead():
 
 
 def test_stuck_gives_up_and_holds_after_its_tries():
-    config = Config()
+    config = rover_config()
     config.failsafe.stuck_max_tries = 1
     bench = driving(config)
     bench.frozen = True

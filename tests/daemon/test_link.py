@@ -13,7 +13,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
-from rover_ctl.mavlink.vehicle import CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus, decode_range  # noqa: E402
+from rover_ctl.mavlink.vehicle import (CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus,  # noqa: E402
+                                      VehicleVersion, decode_range)  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from support import free_port  # noqa: E402
 
@@ -44,6 +45,10 @@ def drain(link: VehicleLink, want: type, timeout_s: float = 2.0):
     raise AssertionError(f"no {want.__name__} within {timeout_s} s")
 
 
+def send_version(vehicle, custom: bytes) -> None:
+    vehicle.mav.autopilot_version_send(mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2, 0x04070000, 0, 0, 0, list(custom), [0] * 8, [0] * 8, 0, 0, 0)
+
+
 @pytest.fixture
 def pair():
     port = free_port(socket.SOCK_DGRAM)
@@ -53,6 +58,12 @@ def pair():
     vehicle.mav.heartbeat_send(mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, mav.MAV_MODE_FLAG_SAFETY_ARMED, 0, 0)
     status = link.wait_vehicle(2.0)
     assert isinstance(status, VehicleStatus) and status.armed and status.custom_mode == 0
+    # The link asks who the vehicle is; answered as ArduPilot does (its git hash as custom version).
+    request = receive(vehicle, "COMMAND_LONG")
+    assert (request.command, request.param1) == (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    vehicle.mav.command_ack_send(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_RESULT_ACCEPTED)
+    send_version(vehicle, b"64a9c787")
+    assert drain(link, VehicleVersion).lockstep is False
     # The link heartbeats as a GCS from SYSID_MYGCS, once a period (udpin: now that it knows the peer).
     clock.t += LinkParams().heartbeat_period_s
     link.tick()
@@ -148,8 +159,43 @@ def test_overrides_and_release(pair):
     assert (msg.chan1_raw, msg.chan3_raw) == (0, 0)
 
 
+def test_timesync_probe_is_answered_and_is_not_a_marker(pair):
+    """ArduPilot's latency probe, TIMESYNC(tc1=0, ts1=now) every 10 s: answered at once with our
+    clock in tc1 and ts1 echoed (MAVLink spec); no frame, no lockstep."""
+    link, vehicle, clock = pair
+    vehicle.mav.timesync_send(0, 123_456_789)
+    vehicle.mav.attitude_send(5020, 0, 0, 0.5, 0, 0, 0.0)
+    items = []
+    deadline = time.monotonic() + 2.0
+    while not any(isinstance(i, Attitude) for i in items) and time.monotonic() < deadline:
+        link.wait_readable(0.05)
+        items += link.poll()
+    assert not any(isinstance(i, FrameMarker) for i in items)
+    answer = receive(vehicle, "TIMESYNC")
+    assert (answer.tc1, answer.ts1) == (int(clock.t * 1e9), 123_456_789)
+    assert link.probes_answered == 1 and link.lockstep_source is None
+
+
+def test_markers_count_only_from_the_component_that_announced_lockstep(pair):
+    link, vehicle, _ = pair
+    send_version(vehicle, b"lockstep")
+    assert drain(link, VehicleVersion).lockstep
+    other = mavutil.mavlink_connection(f"udpout:127.0.0.1:{link.conn.port.getsockname()[1]}", source_system=1,
+                                       source_component=mav.MAV_COMP_ID_ONBOARD_COMPUTER, dialect="ardupilotmega")  # fmt: skip
+    other.mav.timesync_send(0, 7_000_000_000)  # same system, another component: a probe
+    items = []
+    deadline = time.monotonic() + 2.0
+    while link.probes_answered == 0 and time.monotonic() < deadline:
+        link.wait_readable(0.05)
+        items += link.poll()
+    assert link.probes_answered == 1 and not any(isinstance(i, FrameMarker) for i in items)
+    other.close()
+
+
 def test_lockstep_marker_is_a_frame_and_is_answered(pair):
     link, vehicle, _ = pair
+    send_version(vehicle, b"lockstep")  # rover-sitl --lockstep announces itself so
+    assert drain(link, VehicleVersion).lockstep
     vehicle.mav.wheel_distance_send(4_980_000, 2, [0.0] * 16)
     vehicle.mav.timesync_send(0, 5_000_000_000)
     vehicle.mav.attitude_send(5020, 0, 0, 0.5, 0, 0, 0.0)  # next frame: must not be in this poll

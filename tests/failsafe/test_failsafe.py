@@ -70,14 +70,21 @@ def test_no_gcs_failsafe_before_a_gcs_was_ever_seen():
 
 def test_silent_rangefinder_reports_that_side_blocked():
     fs = Failsafes(PARAMS)
+    fs.required_rangefinders = frozenset({0, 2, 4, 6})  # the autopilot sets the rangefinder plan's
     d = step(fs, 0.0, range_ages_s={0: 0.02, 2: 0.7, 4: 0.02, 6: 0.02})
     assert d.blocked_orientations == {2} and d.action is Action.NONE
     assert texts(d) == ["FS rangefinder 2: silent, side blocked"]
-    # A required rangefinder never heard from is blocked too; extra ones are watched once seen.
+    # A required rangefinder never heard from is blocked too; one not required is not watched.
     d = step(fs, 0.1, range_ages_s={0: 0.02, 1: 0.9, 2: 0.02})
-    assert d.blocked_orientations == {1, 2, 4, 6}
-    assert step(fs, 2.1, range_ages_s=FRESH_RANGES | {1: 0.02}).blocked_orientations == {1, 4, 6}
-    assert step(fs, 4.2, range_ages_s=FRESH_RANGES | {1: 0.02}).blocked_orientations == set()
+    assert d.blocked_orientations == {2, 4, 6}
+    assert step(fs, 2.1, range_ages_s=FRESH_RANGES | {1: 0.9}).blocked_orientations == {4, 6}
+    assert step(fs, 4.2, range_ages_s=FRESH_RANGES).blocked_orientations == set()
+
+
+def test_no_rangefinder_is_required_until_the_plan_says_so():
+    fs = Failsafes(PARAMS)
+    assert step(fs, 0.0, range_ages_s={}).blocked_orientations == set()
+    assert step(fs, 1.0, range_ages_s={0: 5.0}).blocked_orientations == set()
 
 
 def test_gps_lost_dead_reckons_for_a_bounded_time_then_holds():
