@@ -101,7 +101,6 @@ class Daemon:
         self.log_dir = Path(log_dir) if log_dir else (Path(config.daemon.log_dir) if config.daemon.log_dir else None)
         self.settings = config.daemon
         self._stop = False
-        self.period_s = 1.0 / self.settings.control_rate_hz
         # Vehicle-side state.
         self.link: VehicleLink | None = None
         self.gcs: GcsLink | None = None
@@ -109,8 +108,9 @@ class Daemon:
         self.home: Home | None = None
         self.frame: LocalFrame | None = None
         self.estimator: PoseEstimator | None = None
-        self.wheels = WheelController(config.robot.wheel_radius_m, config.wheel_control)
-        self.navigator = Navigator(self.rulebase, config.navigator, config.robot.max_wheel_rpm, config.robot.wheel_radius_m)
+        robot = config.robot  # read through functions: a parameter changed by the GCS applies at once
+        self.wheels = WheelController(lambda: robot.wheel_radius_m, config.wheel_control)
+        self.navigator = Navigator(self.rulebase, config.navigator, lambda: robot.max_wheel_rpm, lambda: robot.wheel_radius_m)
         self.failsafes = Failsafes(config.failsafe)
         self.decision: FailsafeDecision | None = None
         self.clock_s = 0.0
@@ -120,7 +120,7 @@ class Daemon:
         self._silent_neutral_wall_s = 0.0
         self._marker_wall_s = 0.0
         self.ranges: dict[int, RangeReading] = {}
-        self.proximity = ObstacleMemory(config.proximity, config.robot.footprint_length_m, config.robot.footprint_width_m)
+        self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
         self._remembered_s: dict[int, float] = {}  # time of the last reading put into the memory, per orientation
         self._last_said: str | None = None
         self.battery: Battery | None = None
@@ -133,7 +133,7 @@ class Daemon:
         self._released = False
         self._rx_perf: float | None = None
         self.steps = 0
-        self.table = ConfigParams(config)
+        self.table = ConfigParams.persistent(config)
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
@@ -141,6 +141,10 @@ class Daemon:
         self.planner: Planner | None = None
         self.follower: PathFollower | None = None
         self.executor: MissionExecutor | None = None
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.settings.control_rate_hz
 
     # ---- lifecycle -----------------------------------------------------------------------------
 
@@ -282,7 +286,7 @@ class Daemon:
     def _set_home(self, fix: GpsFix) -> None:
         self.home = Home(fix.lat_deg, fix.lon_deg, fix.alt_m)
         self.frame = LocalFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
-        self.estimator = PoseEstimator(self.frame, self.config.estimator, self.config.robot.track_m)
+        self.estimator = PoseEstimator(self.frame, self.config.estimator, lambda: self.config.robot.track_m)
         self.events.write(fix.time_s, "frame", lat_deg=fix.lat_deg, lon_deg=fix.lon_deg, alt_m=fix.alt_m)
         log.info("home set at %.7f %.7f", fix.lat_deg, fix.lon_deg)
         self._load_mission_into_core()
@@ -301,7 +305,7 @@ class Daemon:
         fence = Fence.from_items(self.mission.fence, to_enu) if self.mission.fence else Fence()
         self.planner = Planner(cfg.planner, cfg.robot, fence=fence)
         self.follower = PathFollower(self.planner, cfg.planner)
-        self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, cfg.robot.max_speed_mps)
+        self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, lambda: cfg.robot.max_speed_mps)
         waypoints = [to_enu(i.x, i.y) for i in self.mission.items if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y)]
         self.events.write(self._now(), "mission", waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items),
                           items=len(self.mission.items), waypoints_en=[list(map(float, w)) for w in waypoints])  # fmt: skip
@@ -374,7 +378,7 @@ class Daemon:
     def params(self) -> dict[str, float]:
         return self.table.params()
 
-    def set_param(self, name: str, value: float) -> bool:
+    def set_param(self, name: str, value: float) -> tuple[bool, str]:
         return self.table.set_param(name, value)
 
     # ---- modes and events ------------------------------------------------------------------------

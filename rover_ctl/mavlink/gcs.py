@@ -25,7 +25,7 @@ The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT 
     set_current(seq: int) -> bool           MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT (wire seq)
     mission_changed(mission, mission_type)  after an accepted upload or clear (255 = all types)
     params() -> dict[str, float]            the parameter table, in a stable order
-    set_param(name: str, value: float) -> bool
+    set_param(name: str, value: float) -> (ok: bool, reason: str)   reason: a STATUSTEXT (refusals)
 
 ``DefaultHandlers`` implements it in memory (tests, and a base for the daemon).
 """
@@ -68,7 +68,7 @@ class AutopilotHandlers(Protocol):
     def set_current(self, seq: int) -> bool: ...
     def mission_changed(self, mission: Mission, mission_type: int) -> None: ...
     def params(self) -> dict[str, float]: ...
-    def set_param(self, name: str, value: float) -> bool: ...
+    def set_param(self, name: str, value: float) -> tuple[bool, str]: ...
 
 
 class DefaultHandlers:
@@ -116,7 +116,7 @@ class DefaultHandlers:
     def params(self) -> dict[str, float]:
         return self.table.params()
 
-    def set_param(self, name: str, value: float) -> bool:
+    def set_param(self, name: str, value: float) -> tuple[bool, str]:
         return self.table.set_param(name, value)
 
 
@@ -151,7 +151,8 @@ class GcsLink:
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
         self.telemetry = Telemetry(self.conn, self.params)
         self.commands = CommandService(self.conn, self.handlers, self.service, self.telemetry, self.home)
-        self.param_service = ParamService(self.conn, self.handlers)
+        self.param_service = ParamService(self.conn, self.handlers, say=self.telemetry.send_statustext,
+                                          rate_hz=lambda: self.params.param_send_rate_hz)  # fmt: skip
         if mission.items or mission.fence or mission.rally:
             self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
 
@@ -168,6 +169,7 @@ class GcsLink:
             if msg.get_type() != "BAD_DATA":
                 self._dispatch(msg, now_s)
         self._send_all(self.service.tick(now_s))
+        self.param_service.tick(now_s)
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = now_s + self.params.heartbeat_period_s
             self.send_heartbeat()
