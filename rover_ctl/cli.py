@@ -16,7 +16,7 @@ from rover_ctl import __version__
 from rover_ctl.config import ConfigError
 
 # Subcommand modules, in the order shown by --help.
-COMMANDS = ("run", "sim", "mission", "fuzzy")
+COMMANDS = ("run", "sim", "mission", "params", "fuzzy")
 
 
 class UserError(Exception):
