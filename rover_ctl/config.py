@@ -3,8 +3,11 @@
 Every tunable number of the daemon lives here as a named, documented field of a section
 dataclass, with its unit in the name. ``Config`` groups the sections; ``load_config`` reads a TOML
 file whose tables are the section names (``[robot]``, ``[link]``, ...) and applies dotted
-``section.field=value`` overrides from the command line. Unknown sections or keys and values of the
-wrong type are refused with a one-line error naming the file and key.
+``section.field=value`` (or ``NAME=value``, a parameter's MAVLink name) overrides from the command
+line. Every numeric field is a parameter of ``rover_ctl.parameters`` (MAVLink name, range, units),
+and every value from the file, the command line or a ground station goes through that table:
+unknown sections or keys, values of the wrong type, out of range or not finite are refused with a
+one-line error naming the file and key.
 
 The SITL emulator has its own parameters (``sitl.params``): it stands for the physical rover and
 shares nothing with the daemon but the wire.
@@ -13,7 +16,6 @@ shares nothing with the daemon but the wire.
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,10 +33,13 @@ class RobotParams:
     track_m: float = 0.32
     """Distance between the left and right wheel contact lines."""
     wheel_radius_m: float = 0.07
+    """Wheel radius: wheel rpm <-> ground speed (ArduPilot WENC_RADIUS)."""
     max_wheel_rpm: float = 200.0
     """Wheel speed the navigator may command at most (the paper's forward_fast peak)."""
     footprint_length_m: float = 0.45
+    """Length of the rectangular footprint (front/back rangefinders sit on its edges)."""
     footprint_width_m: float = 0.40
+    """Width of the footprint: the planner keeps half of it plus the clearance margin free."""
 
     @property
     def max_speed_mps(self) -> float:
@@ -55,7 +60,9 @@ class LinkParams:
     source_system: int = 255
     """Our system id on the vehicle link; ArduPilot accepts RC overrides only from MAV_GCS_SYSID (255; SYSID_MYGCS before Rover 4.7)."""
     source_component: int = 190
+    """Our component id on the vehicle link (MAV_COMP_ID_MISSIONPLANNER, as a ground station)."""
     heartbeat_period_s: float = 1.0
+    """Our HEARTBEAT period on the vehicle link."""
     override_timeout_s: float = 1.0
     """The vehicle's RC override timeout: overrides must be refreshed faster than this."""
     wheel_left_index: int = 0
@@ -67,6 +74,7 @@ class LinkParams:
     wheel_left_sign: float = 1.0
     """+1, or -1 for an encoder that counts backwards when its wheel rolls forwards."""
     wheel_right_sign: float = 1.0
+    """+1, or -1 for an encoder that counts backwards when its wheel rolls forwards."""
     rangefinders: list[int] = field(default_factory=lambda: [-1])
     """DISTANCE_SENSOR orientations the rover has. ``[-1]`` (default): learnt from what the vehicle
     reports during ``rangefinder_discovery_s``; ``[]``: none (GPS-only navigation, avoidance off);
@@ -142,6 +150,7 @@ class FailsafeParams:
     stuck_window_s: float = 4.0
     """Stuck: motion commanded for this long while the rover moved less than stuck_progress_m."""
     stuck_progress_m: float = 0.3
+    """Moving less than this within stuck_window_s while commanded to move counts as stuck."""
     stuck_min_command_mps: float = 0.2
     """A forward speed setpoint above this counts as commanded motion."""
     back_off_s: float = 2.0
@@ -239,6 +248,7 @@ class GcsParams:
     component_id: int = 1
     """MAV_COMP_ID_AUTOPILOT1."""
     heartbeat_period_s: float = 1.0
+    """Our HEARTBEAT period on the GCS link."""
     mission_item_retry_s: float = 0.25
     """Upload: re-request the expected item after this long without it (the mission protocol's
     item timeout, mavlink.io services/mission "Timeouts and Retries")."""
@@ -254,9 +264,16 @@ class GcsParams:
     position_rate_hz: float = 4.0
     """Default GLOBAL_POSITION_INT rate until a GCS asks for another (SET_MESSAGE_INTERVAL)."""
     gps_rate_hz: float = 2.0
+    """Default GPS_RAW_INT rate to the GCS."""
     attitude_rate_hz: float = 10.0
+    """Default ATTITUDE rate to the GCS."""
     sys_status_rate_hz: float = 1.0
+    """Default SYS_STATUS rate to the GCS."""
     mission_current_rate_hz: float = 1.0
+    """Default MISSION_CURRENT rate to the GCS."""
+    param_send_rate_hz: float = 50.0
+    """PARAM_VALUE messages per second while answering PARAM_REQUEST_LIST (about 2.5 kB/s, under
+    half of a 57600 baud telemetry radio)."""
     client_retry_s: float = 1.5
     """`rover-ctl mission` client: resend MISSION_COUNT, REQUEST_LIST or CLEAR_ALL after this long
     without an answer (the mission protocol's default timeout)."""
@@ -320,7 +337,9 @@ class DaemonParams:
     sensor_rate_hz: float = 50.0
     """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE."""
     gps_rate_hz: float = 5.0
+    """Rate asked of the vehicle for GPS_RAW_INT."""
     rangefinder_rate_hz: float = 20.0
+    """Rate asked of the vehicle for DISTANCE_SENSOR."""
     truth_rate_hz: float = 10.0
     """SIMSTATE (emulator ground truth, logged for evaluation; a real vehicle ignores the request)."""
     stream_rerequest_s: float = 3.0
@@ -379,7 +398,8 @@ class AutopilotParams:
 
 @dataclass
 class Config:
-    """All sections. Add a section by adding a dataclass field here."""
+    """All sections. Add a section by adding a dataclass field here (and its numeric fields to the
+    parameter table, ``rover_ctl.parameters``)."""
 
     robot: RobotParams = field(default_factory=RobotParams)
     link: LinkParams = field(default_factory=LinkParams)
@@ -393,52 +413,70 @@ class Config:
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
     proximity: ProximityParams = field(default_factory=ProximityParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
+    command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)
+    """``section.field`` keys given with ``--set``: they win over values persisted from a ground station."""
 
 
-def _coerce(value: Any, current: Any, where: str) -> Any:
-    if isinstance(current, bool):
-        if isinstance(value, bool):
-            return value
-        if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "yes", "no"):
-            return value.lower() in ("true", "1", "yes")
-        raise ConfigError(f"{where}: expected true/false, got {value!r}")
-    if isinstance(current, (int, float)) and not isinstance(current, bool):
-        try:
-            number = float(value)
-        except (TypeError, ValueError, OverflowError):
-            raise ConfigError(f"{where}: expected a number, got {str(value)[:40]!r}") from None
-        if isinstance(current, int) and not isinstance(value, float):
-            if not math.isfinite(number) or number != int(number):
-                raise ConfigError(f"{where}: expected a whole number, got {value!r}")
-            return int(number)
-        return number
-    if isinstance(current, str):
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
-        return value
-    if isinstance(current, (list, tuple)):
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
-        return type(current)(value)
-    return value
+def sections(config: Config) -> dict[str, Any]:
+    """Section name -> section object."""
+    return {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if dataclasses.is_dataclass(getattr(config, f.name))}
 
 
-def _apply(section: Any, values: dict[str, Any], where: str) -> None:
-    names = {f.name for f in dataclasses.fields(section)}
-    for key, value in values.items():
-        if key not in names:
-            raise ConfigError(f"{where}: unknown key {key!r} (known: {', '.join(sorted(names))})")
-        current = getattr(section, key)
-        if dataclasses.is_dataclass(current):
-            if not isinstance(value, dict):
-                raise ConfigError(f"{where}.{key}: expected a table")
-            _apply(current, value, f"{where}.{key}")
-        else:
-            setattr(section, key, _coerce(value, current, f"{where}.{key}"))
+def _apply(config: Config, data: dict[str, Any], where: str) -> set[str]:
+    """Set ``{section: {field: value}}`` through the parameter table; returns the keys set."""
+    from rover_ctl.parameters import BY_KEY, ParamError  # the table is built from this module's dataclasses
+
+    known = sections(config)
+    done = set()
+    for name, values in data.items():
+        if name not in known:
+            raise ConfigError(f"{where}: unknown key {name!r} (known: {', '.join(sorted(known))})")
+        if not isinstance(values, dict):
+            raise ConfigError(f"{where}: {name} must be a table of keys")
+        section = known[name]
+        fields = {f.name for f in dataclasses.fields(section)}
+        for key, value in values.items():
+            if key not in fields:
+                raise ConfigError(f"{where}: unknown key {key!r} in [{name}] (known: {', '.join(sorted(fields))})")
+            dotted = f"{name}.{key}"
+            param = BY_KEY.get(dotted)
+            if param is None:  # a text field (URL, path)
+                if not isinstance(value, str):
+                    raise ConfigError(f"{where}: {dotted}: expected a string, got {value!r}")
+                setattr(section, key, value)
+            else:
+                try:
+                    param.set(config, param.parse(value))
+                except ParamError as exc:
+                    raise ConfigError(f"{where}: {dotted}: {exc} ({param.name})") from None
+            done.add(dotted)
+    return done
+
+
+def apply_overrides(config: Config, overrides: list[str]) -> set[str]:
+    """``section.field=value`` or ``NAME=value`` (a parameter's MAVLink name) items, as given to
+    ``--set``; returns the ``section.field`` keys set. Lists: ``0,2,4,6`` or ``[0,2,4,6]``."""
+    from rover_ctl.parameters import BY_NAME
+
+    done: set[str] = set()
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError(f"--set {item!r}: expected section.key=value or NAME=value")
+        if "." not in key:
+            param = BY_NAME.get(key.upper())
+            if param is None:
+                raise ConfigError(f"--set {item!r}: {key!r} is no parameter name; expected section.key=value or NAME=value")
+            key = param.key
+        section, _, leaf = key.partition(".")
+        done |= _apply(config, {section: {leaf: value.strip()}}, "--set")
+    return done
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
-    """Defaults, then the TOML file at ``path``, then ``section.key=value`` overrides."""
+    """Defaults, then the TOML file at ``path``, then ``--set`` overrides; every numeric value
+    checked against its parameter's range (``rover_ctl.parameters``)."""
     config = Config()
     if path is not None:
         path = Path(path)
@@ -451,13 +489,5 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
         except (ValueError, RecursionError) as exc:  # TOMLDecodeError, a 5000-digit number, nesting
             raise ConfigError(f"{path}: invalid TOML: {str(exc).splitlines()[0] or type(exc).__name__}") from None
         _apply(config, data, str(path))
-    for item in overrides or []:
-        key, sep, value = item.partition("=")
-        if not sep or "." not in key:
-            raise ConfigError(f"--set {item!r}: expected section.key=value")
-        *sections, leaf = key.strip().split(".")
-        nested: dict[str, Any] = {leaf: value.strip()}
-        for name in reversed(sections):
-            nested = {name: nested}
-        _apply(config, nested, "--set")
+    config.command_line = frozenset(apply_overrides(config, overrides or []))
     return config

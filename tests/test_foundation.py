@@ -35,8 +35,15 @@ def test_toml_and_overrides(tmp_path):
         ("[nosuch]\nx = 1\n", [], "unknown key 'nosuch'"),
         ("[robot]\ntrack_m = 'wide'\n", [], "robot.track_m: expected a number"),
         ("[robot\n", [], "invalid TOML"),
-        ("", ["link.source_system=2.5"], "expected a whole number"),
+        ("", ["link.source_system=2.5"], "link.source_system: 2.5 is not a whole number"),
         ("", ["nodot=1"], "expected section.key=value"),
+        ("", ["executor.cruise_speed_mps=99"], r"--set: executor.cruise_speed_mps: 99 is out of range 0 \.\. 20 m/s \(WP_SPEED\)"),
+        ("[executor]\nacceptance_radius_m = nan\n", [], r"executor.acceptance_radius_m: nan is not a finite number \(WP_RADIUS\)"),
+        ("", ["WP_SPEED=inf"], "inf is not a finite number"),
+        ("", ["link.rangefinders=0,2,9"], "list item '9' is not an orientation 0-7"),
+        ("", ["failsafe.gcs_action=land"], "expected one of 0 continue, 1 rtl, 2 hold"),
+        ("", ["NO_SUCH_PARAM=1"], "is no parameter name"),
+        ("[gcs]\nmission_store_path = 3\n", [], "expected a string"),
     ],
 )
 def test_bad_config_is_one_clear_line(tmp_path, text, override, message):

@@ -10,7 +10,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "rover_ctl"
 CORE = ("autopilot", "navigation", "estimation", "fuzzy", "mission")
-CORE_MODULES = ("config.py", "vocabulary.py")
+CORE_MODULES = ("config.py", "vocabulary.py", "parameters.py", "param_store.py")
 SHELL = ("rover_ctl.mavlink", "rover_ctl.app", "rover_ctl.commands", "rover_ctl.cli")
 IO_MODULES = {"socket", "select", "time", "subprocess", "threading", "os", "pathlib", "io", "signal",
               "tempfile", "shutil", "logging", "pymavlink.mavutil"}

@@ -93,7 +93,6 @@ class Daemon:
         """This run's log folder (``rover-ctl run`` makes a new numbered one each start); None: no logs."""
         self.settings = config.daemon
         self._stop = False
-        self.period_s = 1.0 / self.settings.control_rate_hz
         self.autopilot = Autopilot(config, self.rulebase)
         self.link: VehicleLink | None = None
         self.gcs: GcsLink | None = None
@@ -114,11 +113,15 @@ class Daemon:
         self._gcs_heartbeat_vehicle_s: float | None = None
         """Vehicle time at which the last ground-station heartbeat was received."""
         self.steps = 0
-        self.table = ConfigParams(config)
+        self.table = ConfigParams.persistent(config)
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
         self.log_clock = LogClock(lambda: self.link.vehicle_time_s if self.lockstep else None)
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.settings.control_rate_hz
 
     # ---- lifecycle -----------------------------------------------------------------------------
 
@@ -266,7 +269,7 @@ class Daemon:
     def _set_home(self, fix: GpsFix) -> None:
         self.home = Home(fix.lat_deg, fix.lon_deg, fix.alt_m)
         self.frame = LocalFrame(fix.lat_deg, fix.lon_deg, fix.alt_m)
-        self.estimator = PoseEstimator(self.frame, self.config.estimator, self.config.robot.track_m)
+        self.estimator = PoseEstimator(self.frame, self.config.estimator, lambda: self.config.robot.track_m)
         self.events.write(fix.time_s, "frame", lat_deg=fix.lat_deg, lon_deg=fix.lon_deg, alt_m=fix.alt_m)
         log.info("home set at %.7f %.7f", fix.lat_deg, fix.lon_deg)
         self.autopilot.set_home(self.home, self.frame)
@@ -316,7 +319,7 @@ class Daemon:
     def params(self) -> dict[str, float]:
         return self.table.params()
 
-    def set_param(self, name: str, value: float) -> bool:
+    def set_param(self, name: str, value: float) -> tuple[bool, str]:
         return self.table.set_param(name, value)
 
     def _request(self, reply) -> int:

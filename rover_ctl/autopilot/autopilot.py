@@ -138,11 +138,11 @@ class Autopilot:
 
     def __init__(self, config: Config, rulebase: RuleBase) -> None:
         self.config = config
-        robot = config.robot
-        self.wheels = WheelController(robot.wheel_radius_m, config.wheel_control)
-        self.navigator = Navigator(rulebase, config.navigator, robot.max_wheel_rpm, robot.wheel_radius_m)
+        robot = config.robot  # read through functions: a parameter changed by the GCS applies at once
+        self.wheels = WheelController(lambda: robot.wheel_radius_m, config.wheel_control)
+        self.navigator = Navigator(rulebase, config.navigator, lambda: robot.max_wheel_rpm, lambda: robot.wheel_radius_m)
         self.failsafes = Failsafes(config.failsafe)
-        self.proximity = ObstacleMemory(config.proximity, robot.footprint_length_m, robot.footprint_width_m)
+        self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
         self.mode = RoverMode.HOLD
         self.armed = False
         self.home: Home | None = None
@@ -533,7 +533,7 @@ class Autopilot:
                 self._say(f"Fence part ignored: {self.fence_error}", Severity.WARNING)
         self.planner = Planner(cfg.planner, cfg.robot, fence=self.fence)
         self.follower = PathFollower(self.planner, cfg.planner)
-        self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, cfg.robot.max_speed_mps)
+        self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, lambda: cfg.robot.max_speed_mps)
         waypoints = tuple(tuple(map(float, to_enu(i.x, i.y))) for i in self.mission.items
                           if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y))  # fmt: skip
         total = sum(i.command in NAV_COMMANDS for i in self.mission.items)

@@ -25,6 +25,8 @@ pushed off), ``stop`` (leave AUTO/RTL: idle, hold). ``set_current(seq)`` is MISS
 
 API:
     MissionExecutor(items, to_enu, params, max_speed_mps, home_en=(0, 0))
+      (``params`` is read at every update and ``max_speed_mps`` may be a function giving the
+      robot's top speed now, so a changed parameter applies at once)
       .start() / .rtl() / .restart() -> list[Event];  .stop()
       .set_current(seq) -> list[Event]     raises ValueError naming the bad seq
       .update(now_s, position_en) -> ExecutorOutput
@@ -107,24 +109,34 @@ class MissionExecutor:
         items: Sequence[MissionItem],
         to_enu: Callable[[float, float], EN],
         params: ExecutorParams,
-        max_speed_mps: float,
+        max_speed_mps: float | Callable[[], float],
         home_en: EN = (0.0, 0.0),
     ) -> None:
         self.items = list(items)
         self.params = params
-        self.max_speed_mps = max_speed_mps
+        self._max_speed = max_speed_mps if callable(max_speed_mps) else (lambda: max_speed_mps)
         self.home_en = home_en
         self._to_enu = to_enu
         self.mode = Mode.IDLE
         self.current_seq = 1
         self.complete = False
-        self._mission_speed_mps = min(params.cruise_speed_mps, max_speed_mps)
+        self._speed_override_mps: float | None = None  # set by DO_CHANGE_SPEED; WP_SPEED otherwise
         self._jumps_done: dict[int, int] = {}
         self._phase = _Phase.APPROACH
         self._wait_until_s = 0.0
         self._target: EN | None = None
         self._fresh = True  # the current item has not been looked at yet
         self._home_reached = False  # in RTL: once home, stay held there
+
+    @property
+    def max_speed_mps(self) -> float:
+        return self._max_speed()
+
+    @property
+    def _mission_speed_mps(self) -> float:
+        """The AUTO speed limit: the last DO_CHANGE_SPEED of this run, else WP_SPEED, at most the robot's top speed."""
+        speed = self.params.cruise_speed_mps if self._speed_override_mps is None else self._speed_override_mps
+        return min(speed, self.max_speed_mps)
 
     # -- commands from the daemon / GCS -------------------------------------------------------
 
@@ -142,7 +154,7 @@ class MissionExecutor:
     def restart(self) -> list[Event]:
         """Start the mission from seq 1 with fresh jump counts (MAV_CMD_MISSION_START)."""
         self._jumps_done.clear()
-        self._mission_speed_mps = min(self.params.cruise_speed_mps, self.max_speed_mps)
+        self._speed_override_mps = None
         self.complete = False
         self.current_seq = 1
         return self.start()
@@ -241,7 +253,7 @@ class MissionExecutor:
         if item.command == DO_CHANGE_SPEED:
             speed = _number(item.param2)
             if speed > 0:
-                self._mission_speed_mps = min(speed, self.max_speed_mps)
+                self._speed_override_mps = speed
                 if speed > self.max_speed_mps:
                     events.append(_warning(f"Speed {speed:g} m/s clamped to {self.max_speed_mps:.2f}"))
             return False

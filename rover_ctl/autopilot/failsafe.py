@@ -95,18 +95,18 @@ class FailsafeDecision:
 
 
 class _Latch:
-    """Active once ``bad`` has held for ``trigger_s``; inactive once it has been false for ``recovery_s``."""
+    """Active once ``bad`` has held for ``trigger_s``; inactive once it has been false for
+    ``recovery_s``. The delays are passed on every update, so a changed parameter applies at once."""
 
-    def __init__(self, trigger_s: float, recovery_s: float) -> None:
-        self.trigger_s, self.recovery_s = trigger_s, recovery_s
+    def __init__(self) -> None:
         self.active = False
         self._since: float | None = None  # start of the current run of bad (or good, when active)
 
-    def update(self, now_s: float, bad: bool) -> bool | None:
+    def update(self, now_s: float, bad: bool, trigger_s: float, recovery_s: float) -> bool | None:
         """Returns True on the trigger edge, False on the clear edge, None otherwise."""
         if bad != self.active:
             self._since = now_s if self._since is None else self._since
-            if now_s - self._since >= (self.trigger_s if bad else self.recovery_s):
+            if now_s - self._since >= (trigger_s if bad else recovery_s):
                 self.active, self._since = bad, None
                 return bad
         else:
@@ -128,17 +128,16 @@ class Failsafes:
             raise ValueError(f"failsafe.gcs_action: {params.gcs_action!r} is not one of {', '.join(GCS_ACTIONS)}")
         if params.fence_action not in FENCE_ACTIONS:
             raise ValueError(f"failsafe.fence_action: {params.fence_action!r} is not one of {', '.join(FENCE_ACTIONS)}")
-        self.params = params
+        self.params = params  # read at every update: a changed parameter applies at the next step
         self.required_rangefinders: frozenset[int] = frozenset()
         """Orientations that must report: the rangefinder plan's (``rover_ctl.navigation.sensors``),
         set by the autopilot once the rover's rangefinders are known; others are not watched."""
-        r = params.recovery_s
-        self._vehicle = _Latch(0.0, r)
-        self._gcs = _Latch(0.0, r)
-        self._gps = _Latch(0.0, r)
-        self._dead_reckoning_over = _Latch(0.0, r)
-        self._estimator = _Latch(params.estimator_unhealthy_s, r)
-        self._fence = _Latch(0.0, r)
+        self._vehicle = _Latch()
+        self._gcs = _Latch()
+        self._gps = _Latch()
+        self._dead_reckoning_over = _Latch()
+        self._estimator = _Latch()
+        self._fence = _Latch()
         self._ranges: dict[int, _Latch] = {}
         self._stuck = _Stuck.WATCHING
         self._tries = 0
@@ -151,8 +150,8 @@ class Failsafes:
         events: list[FailsafeEvent] = []
         actions: dict[str, Action] = {}
 
-        def check(latch: _Latch, name: str, bad: bool, action: Action, what: str) -> None:
-            edge = latch.update(now_s, bad)
+        def check(latch: _Latch, name: str, bad: bool, action: Action, what: str, trigger_s: float = 0.0) -> None:
+            edge = latch.update(now_s, bad, trigger_s, p.recovery_s)
             if edge is True:
                 severity = Severity.CRITICAL if action >= Action.HOLD else Severity.WARNING
                 events.append(FailsafeEvent(f"FS {name}: {what}"[:50], severity))
@@ -168,14 +167,17 @@ class Failsafes:
         check(self._gps, "GPS lost", inputs.gps_age_s > p.gps_timeout_s, Action.NONE, "dead reckoning")
         dr_over = inputs.gps_age_s > p.gps_timeout_s + p.dead_reckoning_max_s
         check(self._dead_reckoning_over, "GPS lost too long", dr_over, Action.HOLD, "hold")
-        check(self._estimator, "estimator", not inputs.estimator_healthy, Action.HOLD, "unhealthy, hold")
+        check(self._estimator, "estimator", not inputs.estimator_healthy, Action.HOLD, "unhealthy, hold", p.estimator_unhealthy_s)
         fence_action = FENCE_ACTIONS[p.fence_action]
         check(self._fence, "fence breach", not inputs.inside_fence, fence_action, p.fence_action)
 
         required = self.required_rangefinders
         ages = {o: math.inf for o in required} | {o: a for o, a in inputs.range_ages_s.items() if o in required}
+        for orientation in sorted(set(self._ranges) - set(ages)):  # no longer required
+            if self._ranges.pop(orientation).active:
+                events.append(FailsafeEvent(f"FS rangefinder {orientation} cleared", Severity.INFO))
         for orientation in sorted(ages):
-            rf = self._ranges.setdefault(orientation, _Latch(0.0, p.recovery_s))
+            rf = self._ranges.setdefault(orientation, _Latch())
             silent = ages[orientation] > p.rangefinder_timeout_s
             check(rf, f"rangefinder {orientation}", silent, Action.NONE, "silent, side blocked")
         blocked = frozenset(o for o, rf in self._ranges.items() if rf.active)

@@ -73,6 +73,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -215,13 +216,19 @@ def _heading_first_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
 class PoseEstimator:
     """The rover's pose from wheels, gyro, compass and GPS (see the module docstring)."""
 
-    def __init__(self, frame: LocalFrame, params: EstimatorParams, track_m: float) -> None:
-        if not track_m > 0.0:
-            raise ValueError(f"PoseEstimator: track_m must be positive, got {track_m!r}")
+    def __init__(self, frame: LocalFrame, params: EstimatorParams, track_m: float | Callable[[], float]) -> None:
+        """``params`` is read at every reading; ``track_m`` may be a function giving the track in
+        force, so that a changed parameter applies at the next reading."""
+        self._track_m = track_m if callable(track_m) else (lambda: track_m)
+        if not self.track_m > 0.0:
+            raise ValueError(f"PoseEstimator: track_m must be positive, got {self.track_m!r}")
         self.frame = frame
         self.params = params
-        self.track_m = track_m
         self._clear()
+
+    @property
+    def track_m(self) -> float:
+        return self._track_m()
 
     def _clear(self) -> None:
         """Forget everything: the state before the first reading."""

@@ -27,7 +27,7 @@ The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT 
     guided_target(lat, lon, change_mode) -> int   a GUIDED destination, from any of the forms
                                             ground stations send (below)
     params() -> dict[str, float]            the parameter table, in a stable order
-    set_param(name: str, value: float) -> bool
+    set_param(name: str, value: float) -> (ok: bool, reason: str)   reason: a STATUSTEXT (refusals)
 
 A refusal's reason is the handler's to say (a STATUSTEXT before the ACK, as ArduPilot does).
 
@@ -90,7 +90,7 @@ class AutopilotHandlers(Protocol):
     def mission_changed(self, mission: Mission, mission_type: int) -> None: ...
     def guided_target(self, lat_deg: float, lon_deg: float, change_mode: bool) -> int: ...
     def params(self) -> dict[str, float]: ...
-    def set_param(self, name: str, value: float) -> bool: ...
+    def set_param(self, name: str, value: float) -> tuple[bool, str]: ...
 
 
 class DefaultHandlers:
@@ -149,7 +149,7 @@ class DefaultHandlers:
     def params(self) -> dict[str, float]:
         return self.table.params()
 
-    def set_param(self, name: str, value: float) -> bool:
+    def set_param(self, name: str, value: float) -> tuple[bool, str]:
         return self.table.set_param(name, value)
 
 
@@ -188,7 +188,8 @@ class GcsLink:
         self.service = MissionService(mission, self.params, commit=self._commit, set_current=self.handlers.set_current)
         self.telemetry = Telemetry(self.conn, self.params)
         self.commands = CommandService(self.conn, self.handlers, self.service, self.telemetry, self.home)
-        self.param_service = ParamService(self.conn, self.handlers)
+        self.param_service = ParamService(self.conn, self.handlers, say=self.telemetry.send_statustext,
+                                          rate_hz=lambda: self.params.param_send_rate_hz)  # fmt: skip
         if mission.items or mission.fence or mission.rally:
             self.handlers.mission_changed(mission, mav.MAV_MISSION_TYPE_ALL)
 
@@ -213,6 +214,7 @@ class GcsLink:
                 break
             self._dispatch(msg, now_s)
         self._send_all(self.service.tick(now_s))
+        self.param_service.tick(now_s)
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = now_s + self.params.heartbeat_period_s
             self.send_heartbeat()

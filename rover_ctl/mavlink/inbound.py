@@ -9,8 +9,12 @@ looks at every field a microservice reads and returns a ``Verdict``:
 * refuse: the protocol has an answer for a malformed request, which the verdict carries
   (COMMAND_ACK MAV_RESULT_DENIED for a command with a bad param; the mission service answers its
   own errors with MISSION_ACK, see ``rover_ctl.mavlink.mission``);
-* drop: no answer exists (a SET_MODE to an unknown mode, a non-finite PARAM_SET, a message for
-  another component, a frame that failed its CRC): counted in ``Inbound.dropped`` by reason.
+* drop: no answer exists (a SET_MODE to an unknown mode, a message for another component, a frame
+  that failed its CRC): counted in ``Inbound.dropped`` by reason.
+
+PARAM_SET is checked by the parameter service itself (``rover_ctl.parameters``: finite, in range,
+settable), which answers a refusal as ArduPilot does: a STATUSTEXT with the reason and the value
+kept, echoed in PARAM_VALUE.
 
 ``Inbound.failed(msg, exc)`` is the link edge's last resort: a handler that raised anyway is logged
 once per (message type, exception type) with the frame in hex, counted, and the link goes on.
@@ -108,8 +112,6 @@ class Inbound:
             verdict = self._command(msg)
         elif kind == "SET_MODE":
             verdict = PASS if msg.custom_mode in ROVER_MODES else Verdict(False, f"SET_MODE to unknown mode {msg.custom_mode}")
-        elif kind == "PARAM_SET":
-            verdict = PASS if math.isfinite(msg.param_value) else Verdict(False, "PARAM_SET of a non-finite value")
         else:
             verdict = PASS
         if verdict.ok:

@@ -1,94 +1,182 @@
-"""The MAVLink parameter microservice on the GCS link: PARAM_REQUEST_LIST, PARAM_REQUEST_READ
-(by name or index) and PARAM_SET with the PARAM_VALUE echo of the value in force.
+"""The MAVLink parameter microservice on the GCS link, as ArduPilot answers it.
 
-The table itself belongs to the autopilot handlers (``params()`` / ``set_param()``);
-``ConfigParams`` maps ArduPilot parameter names onto the daemon's ``Config``.
+* PARAM_REQUEST_LIST: every parameter as PARAM_VALUE, paced at ``gcs.param_send_rate_hz`` so a
+  full list does not flood a telemetry radio (ArduPilot too spreads it over its update loop);
+  a new request starts the list over.
+* PARAM_REQUEST_READ by name (``param_index`` -1) or by index: that PARAM_VALUE.
+* PARAM_SET: the value is checked against the parameter table (``rover_ctl.parameters``) and
+  answered with PARAM_VALUE carrying the value in force; a refused value (out of range, not
+  finite, not a whole number, not a choice) or a read-only parameter keeps the old value and a
+  STATUSTEXT says why. An unknown name is ignored, as ArduPilot does.
+
+PARAM_VALUE: ``param_count`` the table's size, ``param_index`` the parameter's position in
+``params()`` (also for the reply to a read by name or a set, where ArduPilot sends -1), and
+``param_type`` ArduPilot's type for the parameter (INT8/INT16/INT32 for whole numbers, choices and
+bitmasks, REAL32 otherwise) with the value itself as a float (AUTOPILOT_VERSION announces
+MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT, not byte-wise encoding), which MAVProxy and QGroundControl
+read as they read ArduPilot's.
+
+``ConfigParams`` is the table behind the autopilot handlers' ``params()`` / ``set_param()``: the
+daemon's ``Config`` seen through ``rover_ctl.parameters``, persisted by ``ParamStore``.
 """
 
 from __future__ import annotations
 
 import logging
-import math
-from typing import Any
+from typing import Any, Callable
 
 from rover_ctl.config import Config
+from rover_ctl.param_store import ParamStore, ParamStoreError, store_path
+from rover_ctl.parameters import BY_NAME, MAVLINK, Access, ParamError, values
 from rover_ctl.vocabulary import mav
 
 log = logging.getLogger(__name__)
 
 HANDLED = ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
-
-
-_FS_ACTIONS = {0: "continue", 1: "rtl", 2: "hold"}
+LIST_BURST = 10
+"""PARAM_VALUEs sent at most in one poll while a list is going out."""
 
 
 class ConfigParams:
-    """ArduPilot-named parameters backed by the daemon's ``Config``.
+    """The parameters of a ``Config`` (every one the table exposes over MAVLink, in table order).
 
-    SYSID_THISMAV (read-only here: it takes a restart), WP_RADIUS (executor.acceptance_radius_m),
-    WP_SPEED (executor.cruise_speed_mps), RTL_SPEED (executor.rtl_speed_mps), FS_GCS_TIMEOUT
-    (failsafe.gcs_timeout_s), FS_ACTION (failsafe.gcs_action: 0 continue, 1 RTL, 2 hold).
-    """
+    ``set_param`` applies a value to the config section that owns it, which every consumer reads
+    at its next use, and saves it in ``store`` (if any). ``persistent(config)`` is the daemon's:
+    it loads the values a ground station set before the restart (precedence: defaults < config
+    file < stored < ``--set``; docs/gcs.md)."""
 
-    def __init__(self, config: Config) -> None:
+    def __init__(self, config: Config, store: ParamStore | None = None) -> None:
         self.config = config
-        ex, fs = config.executor, config.failsafe
-        self._fields: dict[str, tuple[object, str]] = {
-            "WP_RADIUS": (ex, "acceptance_radius_m"),
-            "WP_SPEED": (ex, "cruise_speed_mps"),
-            "RTL_SPEED": (ex, "rtl_speed_mps"),
-            "FS_GCS_TIMEOUT": (fs, "gcs_timeout_s"),
-        }
+        self.store = store
+        self.stored: dict[str, float] = {}
+        """What the store holds (values set from a ground station or imported)."""
+        self.store_error: str | None = None
+        """Why the stored parameters could not be loaded (the file was moved aside), if they could not."""
+
+    @classmethod
+    def persistent(cls, config: Config) -> "ConfigParams":
+        path = store_path(config)
+        table = cls(config, ParamStore(path) if path else None)
+        table.load()
+        return table
+
+    def load(self) -> None:
+        """Apply the stored values, except to parameters given with ``--set``. A corrupt store is
+        moved aside with one error line; the daemon then runs on its config."""
+        if self.store is None:
+            return
+        try:
+            self.stored = self.store.load()
+        except ParamStoreError as exc:
+            aside = self.store.quarantine()
+            kept = f"moved to {aside}" if aside else "left as it is"
+            self.store_error = f"{exc}; {kept}, starting without stored parameters"
+            log.error("%s", self.store_error)
+            return
+        applied = []
+        for name, number in self.stored.items():
+            param = BY_NAME[name]
+            if param.access is Access.CONFIG or param.key in self.config.command_line:
+                continue
+            param.set(self.config, param.decode(number))
+            applied.append(name)
+        if applied:
+            log.info("parameters from %s: %s", self.store.path, ", ".join(applied))
 
     def params(self) -> dict[str, float]:
-        values = {"SYSID_THISMAV": float(self.config.gcs.system_id)}
-        values.update({name: float(getattr(obj, attr)) for name, (obj, attr) in self._fields.items()})
-        actions = {v: k for k, v in _FS_ACTIONS.items()}
-        values["FS_ACTION"] = float(actions.get(self.config.failsafe.gcs_action, 0))
-        return values
+        return values(self.config, MAVLINK)
 
-    def set_param(self, name: str, value: float) -> bool:
-        if not math.isfinite(value):
-            return False
-        if name in self._fields:
-            if value < 0:
-                return False
-            obj, attr = self._fields[name]
-            setattr(obj, attr, value)
-            return True
-        if name == "FS_ACTION" and int(value) == value and int(value) in _FS_ACTIONS:
-            self.config.failsafe.gcs_action = _FS_ACTIONS[int(value)]
-            return True
-        return False
+    def set_param(self, name: str, value: float) -> tuple[bool, str]:
+        """(True, "") when applied; (False, why) when refused (the value stays). A store that
+        cannot be written keeps the value for this run and says so: (True, why)."""
+        param = BY_NAME.get(name)
+        if param is None or param.access is Access.CONFIG:
+            return False, f"{name}: no such parameter"
+        if param.access is not Access.RW:
+            return False, f"{name} is read-only: set at start"
+        try:
+            field_value = param.decode(value)
+        except ParamError as exc:
+            return False, f"{name}: {exc}"
+        param.set(self.config, field_value)
+        number = param.encode(field_value)
+        if self.store is None or self.stored.get(name) == number:
+            return True, ""
+        try:
+            self.store.save({**self.stored, name: number})
+        except OSError as exc:
+            log.error("%s: cannot save parameters: %s", self.store.path, exc)
+            return True, f"{name} set but not saved"
+        self.stored[name] = number
+        return True, ""
 
 
 class ParamService:
-    """Answers the parameter protocol from ``handlers.params()`` / ``handlers.set_param()``."""
+    """Answers the parameter protocol from ``handlers.params()`` / ``handlers.set_param()``.
 
-    def __init__(self, conn: Any, handlers: Any) -> None:
+    ``set_param`` may return a bool or ``(ok, reason)``; ``say(text, severity)`` sends a
+    STATUSTEXT (the link's chunking sender); ``rate_hz()`` gives the list's pace."""
+
+    def __init__(self, conn: Any, handlers: Any, say: Callable[[str, int], None] | None = None,
+                 rate_hz: Callable[[], float] = lambda: 50.0) -> None:  # fmt: skip
         self.conn = conn
         self.handlers = handlers
+        self.say = say or (lambda text, severity: conn.mav.statustext_send(severity, text.encode()[:50], 0, 0))
+        self.rate_hz = rate_hz
+        self._pending: list[str] = []  # names still to send for a list request, in order
+        self._credit = 0.0
+        self._last_s: float | None = None
 
     def handle(self, msg) -> None:
         kind = msg.get_type()
         if kind == "PARAM_REQUEST_LIST":
-            table = self.handlers.params()
-            for index, name in enumerate(table):
-                self._send(name, table, index)
+            self._pending = list(self.handlers.params())
+            self._credit = 0.0
+            self._last_s = None
         elif kind == "PARAM_REQUEST_READ":
             table = self.handlers.params()
             names = list(table)
-            name = msg.param_id if msg.param_index < 0 else (names[msg.param_index] if msg.param_index < len(names) else None)
+            if msg.param_index < 0:
+                name = msg.param_id
+            else:
+                name = names[msg.param_index] if msg.param_index < len(names) else None
             if name in table:
-                self._send(name, table)
+                self._send(name, table, names)
         elif kind == "PARAM_SET":
-            if self.handlers.set_param(msg.param_id, msg.param_value):
-                log.info("parameter %s set to %g", msg.param_id, msg.param_value)
+            name = msg.param_id
+            before = self.handlers.params()
+            if name not in before:
+                log.debug("PARAM_SET of unknown parameter %r ignored", name)
+                return
+            result = self.handlers.set_param(name, msg.param_value)
+            ok, reason = result if isinstance(result, tuple) else (bool(result), "" if result else f"{name}: refused")
+            if ok:
+                log.info("parameter %s set to %g", name, msg.param_value)
+            else:
+                log.info("parameter %s: set to %r refused: %s", name, msg.param_value, reason)
+            if reason:
+                self.say(reason, mav.MAV_SEVERITY_WARNING)
             table = self.handlers.params()  # echo the value in force, as ArduPilot does
-            if msg.param_id in table:
-                self._send(msg.param_id, table)
+            self._send(name, table, list(table))
 
-    def _send(self, name: str, table: dict[str, float], index: int | None = None) -> None:
-        if index is None:
-            index = list(table).index(name)
-        self.conn.mav.param_value_send(name.encode(), table[name], mav.MAV_PARAM_TYPE_REAL32, len(table), index)
+    def tick(self, now_s: float) -> None:
+        """Send what is due of a list request (call every loop turn)."""
+        if not self._pending:
+            return
+        if self._last_s is not None:
+            self._credit = min(float(LIST_BURST), self._credit + (now_s - self._last_s) * self.rate_hz())
+        else:
+            self._credit = float(LIST_BURST)
+        self._last_s = now_s
+        table = self.handlers.params()
+        names = list(table)
+        while self._pending and self._credit >= 1.0:
+            name = self._pending.pop(0)
+            if name in table:
+                self._send(name, table, names)
+                self._credit -= 1.0
+
+    def _send(self, name: str, table: dict[str, float], names: list[str]) -> None:
+        param = BY_NAME.get(name)
+        kind = param.mav_type if param is not None else mav.MAV_PARAM_TYPE_REAL32
+        self.conn.mav.param_value_send(name.encode(), table[name], kind, len(table), names.index(name))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 from rover_ctl.config import NavigatorParams, RobotParams
 from rover_ctl.fuzzy import RuleBase, RuleBaseError, load_rulebase
@@ -57,13 +58,15 @@ class Navigator:
         self,
         rulebase: RuleBase | str,
         params: NavigatorParams,
-        max_wheel_rpm: float,
-        wheel_radius_m: float = RobotParams.wheel_radius_m,
+        max_wheel_rpm: float | Callable[[], float],
+        wheel_radius_m: float | Callable[[], float] = RobotParams.wheel_radius_m,
     ) -> None:
+        """``params`` is read at every step; the robot's numbers may be functions giving the value
+        in force, so that a changed parameter applies at the next step."""
         self.rulebase = load_rulebase(rulebase) if isinstance(rulebase, str) else rulebase
         self.params = params
-        self.max_wheel_rpm = max_wheel_rpm
-        self.wheel_radius_m = wheel_radius_m
+        self._max_wheel_rpm = max_wheel_rpm if callable(max_wheel_rpm) else (lambda: max_wheel_rpm)
+        self._wheel_radius_m = wheel_radius_m if callable(wheel_radius_m) else (lambda: wheel_radius_m)
         names = self.rulebase.input_names
         missing = [n for n in ("target_distance", "target_direction") if n not in names]
         missing += [n for n in OUTPUTS if n not in self.rulebase.output_names]
@@ -74,15 +77,21 @@ class Navigator:
                 f"(missing {', '.join(missing) or '-'}; unknown inputs {', '.join(unknown) or '-'}; "
                 f"inputs must be target_distance, target_direction, obstacle_<{'|'.join(SIDES)}>)"
             )
-        self._obstacles = []  # (input name, orientation, metres -> input units)
+        self._obstacles = []  # (input name, orientation, whether the input is in metres)
         for variable in self.rulebase.inputs:
             if variable.name.startswith("obstacle_"):
-                scale = 1.0 if variable.unit == "m" else params.paper_range_units_per_m
-                self._obstacles.append((variable.name, SIDES[variable.name.removeprefix("obstacle_")], scale))
-        full_scale = max(abs(s.peak) for name in OUTPUTS for s in self.rulebase.outputs[self.rulebase.output_names.index(name)].sets)
-        self._rpm_per_output = max_wheel_rpm / full_scale
+                self._obstacles.append((variable.name, SIDES[variable.name.removeprefix("obstacle_")], variable.unit == "m"))
+        self._full_scale = max(abs(s.peak) for name in OUTPUTS for s in self.rulebase.outputs[self.rulebase.output_names.index(name)].sets)
         self.rangefinders: RangefinderPlan | None = None
         """How the rover's rangefinders feed the obstacle inputs (None: as passed)."""
+
+    @property
+    def max_wheel_rpm(self) -> float:
+        return self._max_wheel_rpm()
+
+    @property
+    def wheel_radius_m(self) -> float:
+        return self._wheel_radius_m()
 
     @property
     def orientations(self) -> list[int]:
@@ -112,14 +121,15 @@ class Navigator:
         inputs = {"target_distance": distance_m, "target_direction": math.degrees(relative_rad) % 360.0}
         if self.rangefinders is not None:
             ranges_m = self.rangefinders.inputs(ranges_m, self.orientations)
-        for name, orientation, scale in self._obstacles:
+        for name, orientation, in_metres in self._obstacles:
             range_m = ranges_m.get(orientation, math.nan)
             if range_m is None or math.isnan(range_m):
                 range_m = self.params.missing_range_m
-            inputs[name] = range_m * scale
+            inputs[name] = range_m * (1.0 if in_metres else self.params.paper_range_units_per_m)
         crisp = self.rulebase.evaluate_one(**inputs)
-        left = crisp["left_motor"] * self._rpm_per_output
-        right = crisp["right_motor"] * self._rpm_per_output
+        rpm_per_output = self.max_wheel_rpm / self._full_scale
+        left = crisp["left_motor"] * rpm_per_output
+        right = crisp["right_motor"] * rpm_per_output
         if speed_limit_mps is not None:
             limit_rpm = max(speed_limit_mps, 0.0) / (math.tau * self.wheel_radius_m) * 60.0
             fastest = max(abs(left), abs(right))

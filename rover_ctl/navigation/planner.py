@@ -17,7 +17,8 @@ both ends (the reduced visibility graph) and stays in F (one vectorised shapely 
 A visibility graph gives exact shortest paths with few nodes in the open, sparse fields a rover
 mission crosses; a grid A* would need a fine grid over a ~100 m field for the same accuracy and
 still produce staircase paths. The static graph is built once and rebuilt only when temporary
-obstacles change; a query adds the start and goal.
+obstacles change or the clearance or ``circle_segments`` parameters did (checked at each query,
+so a changed parameter applies to the next plan); a query adds the start and goal.
 
 Circles become regular ``PlannerParams.circle_segments``-gons that circumscribe the inflated
 circle, and polygon corners are rounded with the chord error compensated, so the polygonal
@@ -264,14 +265,22 @@ class Planner:
         circles: Iterable[Circle] = (),
     ) -> None:
         self.params = params
+        self.robot = robot
         self.fence = fence
-        self.clearance_m = robot.footprint_width_m / 2.0 + params.clearance_margin_m
         self._obstacle_polygons = [Polygon(p) for p in polygons]
         self._obstacle_circles = list(circles)
         self._blocked: list[tuple[float, Circle]] = []  # (time added, circle)
         self._inclusion_polygons = [Polygon(p) for p in fence.inclusion_polygons]
         self._exclusion_polygons = [Polygon(p) for p in fence.exclusion_polygons]
         self._rebuild()
+
+    @property
+    def clearance_m(self) -> float:
+        return self.robot.footprint_width_m / 2.0 + self.params.clearance_margin_m
+
+    def _geometry(self) -> tuple[float, int]:
+        """The parameters the free space and graph are built from."""
+        return self.clearance_m, self.params.circle_segments
 
     # -- geometry -------------------------------------------------------------------------------
 
@@ -299,6 +308,7 @@ class Planner:
         return region, zones
 
     def _rebuild(self) -> None:
+        self._built_for = self._geometry()
         region, zones = self._inflated(0.0)
         node_region, node_zones = self._inflated(NODE_OFFSET_M)
         if region is None:  # no inclusion fence: a box far beyond any mission bounds the plane
@@ -370,6 +380,8 @@ class Planner:
         reason = self._raw_violation(goal_en)
         if reason is not None:
             return Path((start_en,), error=reason)
+        if self._built_for != self._geometry():
+            self._rebuild()
         start_free, goal_free = self._to_free(start_en), self._to_free(goal_en)
         if start_free is None or goal_free is None:
             return Path((start_en,), error="no free space: the inclusion fence is narrower than the rover's clearance")

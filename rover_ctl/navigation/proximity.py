@@ -15,6 +15,7 @@ the width, diagonals at the corners), which is where small rovers mount them.
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -27,18 +28,23 @@ ORIENTATION_RAD = {o: -math.radians(45.0 * o) for o in range(8)}
 class ObstacleMemory:
     """Echoes remembered in ENU; ``ranges`` folds them into per-sensor ranges."""
 
-    def __init__(self, params: ProximityParams, footprint_length_m: float, footprint_width_m: float) -> None:
+    def __init__(
+        self,
+        params: ProximityParams,
+        footprint_length_m: float | Callable[[], float],
+        footprint_width_m: float | Callable[[], float],
+    ) -> None:
+        """``params`` is read at every call; the footprint may be functions giving the value in force."""
         self.params = params
-        self._half_length_m = footprint_length_m / 2.0
-        self._half_width_m = footprint_width_m / 2.0
+        self._length_m = footprint_length_m if callable(footprint_length_m) else (lambda: footprint_length_m)
+        self._width_m = footprint_width_m if callable(footprint_width_m) else (lambda: footprint_width_m)
         self._points = np.empty((0, 3))  # rows: time_s, east_m, north_m
-        self._sector_cos = math.cos(math.radians(params.sector_half_deg))
 
     def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
         """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
         body = ORIENTATION_RAD[orientation % 8]
-        forward = self._half_length_m * np.sign(round(math.cos(body), 6))
-        left = self._half_width_m * np.sign(round(math.sin(body), 6))
+        forward = self._length_m() / 2.0 * np.sign(round(math.cos(body), 6))
+        left = self._width_m() / 2.0 * np.sign(round(math.sin(body), 6))
         c, s = math.cos(heading_rad), math.sin(heading_rad)
         return east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + body
 
@@ -56,12 +62,13 @@ class ObstacleMemory:
         if not len(self._points):
             return dict(latest_m)
         out = {}
+        sector_cos = math.cos(math.radians(self.params.sector_half_deg))
         for orientation, range_m in latest_m.items():
             e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
             d_east, d_north = self._points[:, 1] - e, self._points[:, 2] - n
             distance = np.hypot(d_east, d_north)
             along = d_east * math.cos(axis) + d_north * math.sin(axis)
-            inside = along >= self._sector_cos * distance  # within sector_half_deg of the axis
+            inside = along >= sector_cos * distance  # within sector_half_deg of the axis
             nearest = float(distance[inside].min()) if inside.any() else math.inf
             out[orientation] = min(range_m, nearest) if range_m is not None and not math.isnan(range_m) else range_m
         return out

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 from rover_ctl.config import WheelControlParams
 from rover_ctl.estimation.readings import WheelDistance
@@ -75,9 +76,9 @@ def rc_to_motors(steering_us: int, throttle_us: int, params: WheelControlParams)
 class WheelSpeedMeter:
     """Low-passed wheel speeds (rpm) from cumulative WHEEL_DISTANCE readings."""
 
-    def __init__(self, wheel_radius_m: float, params: WheelControlParams):
-        self._radius_m = wheel_radius_m
-        self._tau_s = params.speed_filter_tau_s
+    def __init__(self, wheel_radius_m: float | Callable[[], float], params: WheelControlParams):
+        self._radius_m = wheel_radius_m if callable(wheel_radius_m) else (lambda: wheel_radius_m)
+        self.params = params
         self._last: WheelDistance | None = None
         self.left_rpm = 0.0
         self.right_rpm = 0.0
@@ -92,8 +93,8 @@ class WheelSpeedMeter:
         if dt_s <= 0.0:
             self._last = last  # a repeated or out-of-order reading carries no speed
             return
-        to_rpm = 60.0 / (2.0 * math.pi * self._radius_m * dt_s)
-        alpha = dt_s / (self._tau_s + dt_s)
+        to_rpm = 60.0 / (2.0 * math.pi * self._radius_m() * dt_s)
+        alpha = dt_s / (self.params.speed_filter_tau_s + dt_s)
         self.left_rpm += alpha * ((reading.left_m - last.left_m) * to_rpm - self.left_rpm)
         self.right_rpm += alpha * ((reading.right_m - last.right_m) * to_rpm - self.right_rpm)
         self.time_s = reading.time_s
@@ -127,9 +128,10 @@ class _PiWheel:
 
 
 class WheelController:
-    """Closes the left and right wheel speeds; output mixed into RC PWM."""
+    """Closes the left and right wheel speeds; output mixed into RC PWM. ``params`` is read at every
+    step and ``wheel_radius_m`` may be a function giving the radius in force."""
 
-    def __init__(self, wheel_radius_m: float, params: WheelControlParams):
+    def __init__(self, wheel_radius_m: float | Callable[[], float], params: WheelControlParams):
         self.params = params
         self.meter = WheelSpeedMeter(wheel_radius_m, params)
         self._left = _PiWheel(params)

@@ -118,8 +118,9 @@ def test_the_daemons_default_wheel_map_is_caught_reversed_on_ardupilot(tmp_path)
         assert run.wait_for(lambda p: p.mode == RoverMode.AUTO, wall_timeout_s=20.0)
         assert run.wait_for(lambda p: p.mode == RoverMode.HOLD, wall_timeout_s=60.0), run.progress
         assert 5 not in run.progress.reached
-        # Arming again is refused: the map must be fixed first.
-        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_DENIED
+        # Disarmed, arming again is refused, even forced: the map must be fixed first.
+        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0) == mav.MAV_RESULT_ACCEPTED
+        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, 21196) == mav.MAV_RESULT_DENIED
 
 
 def test_a_rule_base_side_the_rover_lacks_is_refused_at_arming(tmp_path):

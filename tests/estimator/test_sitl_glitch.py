@@ -24,6 +24,9 @@ GLITCH_NORTH_M = 50.0
 GLITCH_S = 30.0
 RECOVERY_S = 10.0
 CROSS_TRACK_LIMIT_M = 2.0
+RECOVERED_RATIO = 1.25
+"""After recovery the error's maximum over 20 s is within this factor of its maximum over the 20 s
+before the glitch (both are maxima of a noisy series: equal levels differ by a few per cent)."""
 ACCEPTANCE_M = 2.0
 """ExecutorParams.acceptance_radius_m."""
 
@@ -93,5 +96,5 @@ def test_fifty_metre_glitch_for_thirty_seconds_keeps_the_rover_on_its_path(tmp_p
           f"during {during_m:.2f} m, from +{RECOVERY_S:g} s {after_m:.2f} m; reached {reached}")  # fmt: skip
     assert cross_track_m < CROSS_TRACK_LIMIT_M
     assert not false_reach
-    assert after_m <= max(normal_m, 1.0)
+    assert after_m <= RECOVERED_RATIO * max(normal_m, 1.0)
     assert not any(t.startswith("FS GPS") for t in texts), texts

@@ -95,7 +95,7 @@ def well_formed_effects(msg, system_id: int = 1, component_id: int = 1) -> set[s
     if kind == "SET_MODE":
         return {"set_mode"} if msg.custom_mode in ROVER_MODES else set()
     if kind == "PARAM_SET":
-        return {"set_param"} if math.isfinite(msg.param_value) else set()
+        return {"set_param"}  # the parameter service refuses what is not finite or out of range
     if kind in ("MISSION_SET_CURRENT",):
         return {"set_current"}
     if kind == "SET_POSITION_TARGET_GLOBAL_INT":

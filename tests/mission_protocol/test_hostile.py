@@ -159,14 +159,13 @@ def test_messages_for_another_component_and_unknown_modes_are_dropped_and_counte
         conn = gcs(udp_port)
         conn.mav.command_long_send(1, 100, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
         conn.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 99)
-        conn.mav.param_set_send(1, 1, b"WP_RADIUS", math.inf, mav.MAV_PARAM_TYPE_REAL32)
         conn.write(b"\xfd\x09garbage that is no frame")  # an unfinished frame: must not swallow the next datagram
         conn.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, RoverMode.MANUAL, 0, 0, 0, 0, 0)
         assert expect(conn, "COMMAND_ACK", command=mav.MAV_CMD_DO_SET_MODE).result == mav.MAV_RESULT_ACCEPTED
         assert not handlers.armed and handlers.custom_mode == RoverMode.MANUAL
         dropped = lt.link.inbound.dropped
         assert dropped["command for another component"] == 1
-        assert dropped["SET_MODE to unknown mode 99"] == 1 and dropped["PARAM_SET of a non-finite value"] == 1
+        assert dropped["SET_MODE to unknown mode 99"] == 1
         assert dropped["unfinished frame at the end of a datagram"] == 1
 
 

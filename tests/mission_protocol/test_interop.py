@@ -30,13 +30,13 @@ LINK = GcsParams(heartbeat_period_s=0.2)
 class MavProxy:
     """MAVProxy as a child process, driven through its stdin (``--cmd`` runs before the link is up)."""
 
-    def __init__(self, port: int, workdir: Path) -> None:
+    def __init__(self, port: int, workdir: Path, modules: str = "wp,fence,rally,mode,arm") -> None:
         mavproxy = VENV_BIN / "mavproxy.py"
         if not mavproxy.exists():
             pytest.skip(f"{mavproxy} is not installed")
         self.proc = subprocess.Popen(
             [sys.executable, str(mavproxy), f"--master=udpout:127.0.0.1:{port}", f"--state-basedir={workdir}",
-             "--default-modules=wp,fence,rally,mode,arm", "--nowait"],
+             f"--default-modules={modules}", "--nowait"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=workdir,
         )  # fmt: skip
         self.lines: queue.Queue[str] = queue.Queue()

@@ -1,4 +1,4 @@
-"""GcsLink over real UDP sockets: heartbeat, commands, params, the mission service, the store."""
+"""GcsLink over real UDP sockets: heartbeat, commands, the mission service, the store (params: tests/parameters)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from mission_protocol.helpers import HOME, MAVPROXY, MAVSDK, LinkThread, expect, gcs
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from rover_ctl.config import Config, GcsParams
+from rover_ctl.config import GcsParams
 from rover_ctl.mavlink.commands import CAPABILITIES
 from rover_ctl.mavlink.gcs import DefaultHandlers, GcsLink
 from rover_ctl.vocabulary import RoverMode
@@ -89,30 +89,6 @@ def test_home_position_fails_without_a_home(url, udp_port):
     with LinkThread(url, params=FAST):
         conn = gcs(udp_port)
         assert command(conn, mav.MAV_CMD_GET_HOME_POSITION).result == mav.MAV_RESULT_FAILED
-
-
-def test_params_list_read_and_set_reach_the_config(url, udp_port):
-    config = Config()
-    with LinkThread(url, params=FAST, handlers=DefaultHandlers(config)):
-        conn = gcs(udp_port)
-        conn.mav.param_request_list_send(1, 1)
-        values = {}
-        while len(values) < 6:
-            p = expect(conn, "PARAM_VALUE")
-            values[p.param_id] = p
-        assert {"SYSID_THISMAV", "WP_RADIUS", "WP_SPEED", "RTL_SPEED", "FS_GCS_TIMEOUT", "FS_ACTION"} <= set(values)
-        assert values["WP_RADIUS"].param_value == config.executor.acceptance_radius_m
-        assert sorted(v.param_index for v in values.values()) == list(range(values["WP_RADIUS"].param_count))
-        conn.mav.param_set_send(1, 1, b"WP_RADIUS", 3.5, mav.MAV_PARAM_TYPE_REAL32)
-        assert expect(conn, "PARAM_VALUE", param_id="WP_RADIUS").param_value == 3.5
-        assert config.executor.acceptance_radius_m == 3.5
-        conn.mav.param_set_send(1, 1, b"FS_ACTION", 2, mav.MAV_PARAM_TYPE_REAL32)
-        expect(conn, "PARAM_VALUE", param_id="FS_ACTION", param_value=2.0)
-        assert config.failsafe.gcs_action == "hold"
-        conn.mav.param_set_send(1, 1, b"SYSID_THISMAV", 7, mav.MAV_PARAM_TYPE_REAL32)  # read-only: echoes 1
-        assert expect(conn, "PARAM_VALUE", param_id="SYSID_THISMAV").param_value == 1.0
-        conn.mav.param_request_read_send(1, 1, b"WP_SPEED", -1)
-        assert expect(conn, "PARAM_VALUE", param_id="WP_SPEED").param_value == pytest.approx(config.executor.cruise_speed_mps)
 
 
 def test_garbage_on_the_link_is_survived(url, udp_port, mission):

@@ -1,0 +1,344 @@
+"""A parameter set from a ground station takes effect the same way for every parameter: at once,
+in the object that uses it, with no stale copy anywhere.
+
+Generic over the table: for every parameter a ground station may set (Access.RW), and every
+exercise of an object that reads it, the objects are built by the daemon and its autopilot
+(``Daemon.__init__``, ``_set_home``, ``Autopilot.mission_changed``: their real wiring) and
+
+    A  run with the defaults,
+    B  built with the defaults, then the parameter set through ``ConfigParams.set_param`` (the
+       PARAM_SET path), then run,
+    C  built with the new value in the config from the start, then run.
+
+B must equal C (the change reached every use: a value copied at construction would make B
+behave like A), and for some new value C must differ from A in at least one exercise (the
+exercise really depends on the parameter, so the test cannot pass vacuously)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from functools import cache
+from types import SimpleNamespace
+
+import pytest
+from estimator.synthetic import CMAC, Sensors, simulate
+
+import rover_ctl.app.daemon as daemon_module
+from rover_ctl.app.daemon import Daemon
+from rover_ctl.config import Config
+from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
+from rover_ctl.mavlink.params import ConfigParams
+from rover_ctl.mission.model import Mission, MissionItem
+from rover_ctl.autopilot import prearm
+from rover_ctl.autopilot.autopilot import LOG_COLUMNS
+from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInputs
+from rover_ctl.fuzzy import load_rulebase
+from rover_ctl.parameters import TABLE, Access, Kind, Param
+from rover_ctl.vocabulary import Cmd, RoverMode
+
+HOME_FIX = GpsFix(0.0, *CMAC.to_geodetic(0.0, 0.0), 584.0, 3, 1.0, 0.0, 0.0, 10)
+"""The first fix: the daemon anchors its frame (and builds the estimator) here, at CMAC."""
+
+
+@cache
+def _rulebase(name: str):
+    return load_rulebase(name)
+
+
+def build(config: Config) -> Daemon:
+    """The daemon's objects for ``config``, wired by the daemon itself (no links are opened)."""
+    original = daemon_module.load_rulebase
+    daemon_module.load_rulebase = _rulebase  # parse the rule base once for the whole module
+    try:
+        daemon = Daemon(config, rulebase="paper")
+    finally:
+        daemon_module.load_rulebase = original
+    # No GCS link: the messages of the autopilot's events go nowhere.
+    daemon.gcs = SimpleNamespace(send_statustext=lambda text, severity: None, send_mission_current=lambda seq, state: None,
+                                 send_mission_item_reached=lambda seq: None)  # fmt: skip
+    return daemon
+
+
+def with_mission(daemon: Daemon, items: list[MissionItem], fence: list[MissionItem] = ()) -> Daemon:
+    daemon._set_home(HOME_FIX)
+    daemon.autopilot.mission_changed(Mission(items=items, fence=list(fence)), 0)
+    return daemon
+
+
+def latlon(east_m: float, north_m: float) -> tuple[float, float]:
+    return CMAC.to_geodetic(east_m, north_m)
+
+
+def wp(east_m: float, north_m: float, radius_m: float = 0.0) -> MissionItem:
+    lat, lon = latlon(east_m, north_m)
+    return MissionItem(Cmd.NAV_WAYPOINT, param2=radius_m, x=lat, y=lon)
+
+
+# ---- exercises: each drives one object of the daemon and returns what it decided, step by step --
+
+
+def ex_failsafes(d: Daemon) -> list:
+    fs, trace = d.autopilot.failsafes, []
+    fs.required_rangefinders = frozenset({0, 1, 2, 4, 6})  # as a rangefinder plan sets them
+    position = [0.0, 0.0]
+    for k in range(900):
+        t = k * 0.1
+
+        def ramp(start: float, end: float, fresh: float) -> float:
+            return t - start if start <= t < end else fresh
+
+        if 80.0 <= t < 83.0:
+            position[0] += 0.1  # drives 3 m clear after the back-offs
+        inputs = FailsafeInputs(
+            vehicle_age_s=ramp(5, 9, 0.02),
+            gcs_age_s=ramp(10, 25, 0.5),
+            gps_age_s=ramp(28, 55, 0.1),
+            range_ages_s={0: ramp(62, 65, 0.02), 1: ramp(63, 66, 0.02), 2: 0.02, 4: 0.02, 6: ramp(64, 64.4, 0.02)},
+            estimator_healthy=not 57.0 <= t < 58.5,
+            inside_fence=not 60.0 <= t < 61.0,
+            driving=t >= 66.0,
+            commanded_speed_mps=0.5 if t < 86.0 else 0.25,
+            position_en=tuple(position),
+        )
+        decision = fs.update(t, inputs)
+        trace.append((decision.action, decision.reasons, [e.text for e in decision.events], decision.blocked_orientations,
+                      decision.dead_reckoning, decision.replan, decision.stuck_tries))  # fmt: skip
+    return trace
+
+
+def mission_for_executor(d: Daemon) -> None:
+    unchanged_speed = MissionItem(Cmd.DO_CHANGE_SPEED, param1=1.0, param2=0.0)
+    items = [wp(0, 12), unchanged_speed, unchanged_speed, unchanged_speed, wp(10, 12, radius_m=1.0), MissionItem(Cmd.NAV_RETURN_TO_LAUNCH), wp(5, 0)]
+    with_mission(d, items)
+
+
+def ex_executor(d: Daemon) -> list:
+    ex = d.autopilot.executor
+    trace = [[e.text for e in ex.start()]]
+    position = (0.0, 0.0)
+    for k in range(700):
+        t = k * 0.1
+        if k == 450:
+            trace.append([e.text for e in ex.rtl()])
+            position = (20.0, 20.0)
+        out = ex.update(t, position)
+        trace.append((out.target_en, out.speed_limit_mps, out.hold, out.acceptance_radius_m, out.current_seq, [e.text for e in out.events]))
+        if out.target_en is not None and not out.hold:
+            de, dn = out.target_en[0] - position[0], out.target_en[1] - position[1]
+            step = min(math.hypot(de, dn), out.speed_limit_mps * 0.1)
+            if step > 0:
+                scale = step / math.hypot(de, dn)
+                position = (position[0] + de * scale, position[1] + dn * scale)
+    return trace
+
+
+def ex_navigator(d: Daemon) -> list:
+    nav, trace = d.autopilot.navigator, []
+    for heading in (0.0, 1.0, 2.5):
+        for target in ((5.0, 0.0), (0.0, 8.0), (-3.0, -2.0)):
+            for ranges in ({0: 0.8, 2: 2.0, 4: 3.5, 6: 1.2}, {0: 1.5, 6: 0.6}, {}):
+                for limit in (None, 0.3, 2.0):
+                    out = nav.step(0.0, 0.0, heading, target[0], target[1], ranges, limit)
+                    trace.append((out.left_rpm, out.right_rpm))
+    return trace
+
+
+def ex_wheels(d: Daemon) -> list:
+    wheels = d.autopilot.wheels
+    trace = [dataclasses.astuple(wheels.neutral())]
+    left = right = 0.0
+    for k in range(250):
+        t = k * 0.02
+        speed = 0.3 if t < 2.0 else 0.6  # the wheels turn slower than asked: the integrator grows
+        left += speed * 0.02
+        right += (speed - 0.1) * 0.02
+        if not 3.0 <= t < 3.5:  # a gap in WHEEL_DISTANCE
+            wheels.on_wheels(WheelDistance(t, left, right))
+        cmd = wheels.step(t, 0.02, 150.0 if k < 200 else -40.0, 120.0 if k < 200 else 40.0)
+        trace.append(dataclasses.astuple(cmd) + (wheels.meter.left_rpm, wheels.meter.right_rpm))
+    return trace
+
+
+def ex_proximity(d: Daemon) -> list:
+    memory, trace = d.autopilot.proximity, []
+    for k in range(40):
+        t = k * 0.1
+        heading = 0.05 * k
+        memory.add(t, 0.1 * k, 0.0, heading, k % 8, 1.0 + 0.05 * k)
+        memory.add(t, 0.1 * k, 0.0, heading, 0, 2.0)
+        if k % 4 == 0:
+            ranges = memory.ranges(t + 0.3 * (k % 12), 0.1 * k, 0.05, heading + 0.4, {o: 4.0 for o in range(8)})
+            trace.append(sorted(ranges.items()))
+    return trace
+
+
+def mission_for_planner(d: Daemon) -> None:
+    lat, lon = latlon(15.0, 0.5)
+    circle = MissionItem(Cmd.NAV_FENCE_CIRCLE_EXCLUSION, frame=0, param1=3.0, x=lat, y=lon)
+    with_mission(d, [wp(30, 0)], [circle])
+
+
+def ex_planner(d: Daemon) -> list:
+    follower, trace = d.autopilot.follower, []
+    for k in range(120):
+        t = k * 0.5
+        along = min(2.0 * k, 28.0)
+        position = (along, 4.0 * math.sin(k / 3.0))
+        if k == 5:
+            follower.block(t, (along + 2.0, 0.0))
+        g = follower.update(t, position, (30.0, 0.0))
+        trace.append((g.target_en, g.cross_track_m, g.remaining_m, g.replanned, g.error, g.path.points if g.path else None))
+    trace.append(d.autopilot.planner.is_inside_fence((15.0, 0.5)))
+    return trace
+
+
+def ex_estimator(d: Daemon) -> list:
+    est = d.estimator
+    sensors = Sensors(gps_white_m=1.5, glitches=[(12.0, 22.0, 40.0, 0.0)], outages=[(24.0, 27.0)], imu_period_s=0.04,
+                      slides=[(3.0, 11.0, 1.5, 0.0)])  # a slide the wheels do not see: a gradual disagreement
+    run = simulate(30.0, lambda t: 1.0 if t < 20 else 0.3, lambda t: 0.2 if 8 < t < 12 else 0.0, seed=3, sensors=sensors)
+    readings = [r for r in run.readings if not (isinstance(r, Attitude) and 9.0 <= r.time_s < 10.5)]  # gyro silent in a turn
+    extra = {
+        2.0: GpsFix(2.0 + 1.8, *latlon(2.0, 0.0), 584.0, 3, 1.0, 1.0, 90.0, 10),  # stamped ahead (another clock)
+        3.0: GpsFix(2.9, *latlon(3.0, 0.0), 584.0, 3, math.nan, 1.0, 90.0, 10),  # late, no eph
+        4.0: GpsFix(4.0, *latlon(4.0, 0.0), 584.0, 3, 0.05, 1.0, 90.0, 10),  # claims 5 cm
+        28.0: Attitude(28.0 - 4.0, 0.0, 0.0),  # 4 s older: a vehicle reboot?
+    }
+    trace = []
+    for r in readings:
+        if isinstance(r, WheelDistance) and abs(r.time_s - 7.0) < 1e-9:
+            r = WheelDistance(r.time_s, r.left_m + 0.2, r.right_m)  # a counter glitch
+        for at in [a for a in extra if r.time_s >= a]:
+            reading = extra.pop(at)
+            (est.on_gps if isinstance(reading, GpsFix) else est.on_attitude)(reading)
+        if isinstance(r, GpsFix):
+            trace.append(est.on_gps(r))
+        elif isinstance(r, Attitude):
+            est.on_attitude(r)
+        else:
+            est.on_wheels(r)
+            p = est.pose()
+            trace.append((p.east_m, p.north_m, p.heading_rad, p.speed_mps, p.yaw_rate_radps, p.healthy, p.gps_ok,
+                          p.position_sigma_m, p.heading_sigma_rad))  # fmt: skip
+    return trace
+
+
+def ex_daemon(d: Daemon) -> list:
+    """The loop period, the hold's braking threshold and the back-off speed."""
+    steps: list = []
+    d.link = SimpleNamespace(last_rx_vehicle_s=None)
+    d.control_step = lambda t_s, vehicle_age_s: steps.append(round(t_s, 6))
+    for k in range(300):
+        d._maybe_step(k * 0.01)
+    ap = d.autopilot
+    ap.on_wheels(WheelDistance(-0.04, 0.0, 0.0))
+    ap.on_wheels(WheelDistance(0.0, 0.02, 0.02))  # rolling at 0.5 m/s
+    holds = [ap._hold(0.0, 0.04, SimpleNamespace(speed_mps=v)) for v in (0.0, 0.03, 0.08, 0.5)]
+    ap.on_vehicle(True)
+    ap._enter(RoverMode.AUTO, "test")
+    pose = SimpleNamespace(east_m=0.0, north_m=0.0, heading_rad=1.57, speed_mps=0.0)
+    back_off = FailsafeDecision(Action.BACK_OFF, ("stuck",), (), frozenset(), False, False, 1)
+    command = ap._decide(0.04, 0.04, pose, back_off, dict.fromkeys(LOG_COLUMNS, ""))
+    return [steps, [dataclasses.astuple(h) for h in holds], dataclasses.astuple(command)]
+
+
+def ex_autopilot(d: Daemon) -> list:
+    """LOITER's station keeping (pushed out and back) and the pre-arm distance check."""
+    ap = d.autopilot
+    trace = [prearm.failures(ap._arming_inputs())]
+    ap._station_en, ap._guided_target_en, ap._returning = (0.0, 0.0), None, False
+    for k in range(60):
+        trace.append(ap._station_goal((0.1 * min(k, 60 - k), 0.0)))
+    return trace
+
+
+def no_mission(d: Daemon) -> None:
+    pass
+
+
+def home_only(d: Daemon) -> None:
+    d._set_home(HOME_FIX)
+
+
+def mission_ahead(d: Daemon) -> None:
+    with_mission(d, [wp(0, 20)])
+
+
+EXERCISES = {
+    # name: (what the daemon has built before the change, the exercise after it, keys it reads)
+    "failsafes": (no_mission, ex_failsafes, ("failsafe.",)),
+    "executor": (mission_for_executor, ex_executor, ("executor.", "robot.max_wheel_rpm", "robot.wheel_radius_m")),
+    "navigator": (no_mission, ex_navigator, ("navigator.", "robot.max_wheel_rpm", "robot.wheel_radius_m")),
+    "wheels": (no_mission, ex_wheels, ("wheel_control.", "robot.wheel_radius_m")),
+    "proximity": (no_mission, ex_proximity, ("proximity.", "robot.footprint_length_m", "robot.footprint_width_m")),
+    "planner": (mission_for_planner, ex_planner, ("planner.", "robot.footprint_width_m")),
+    "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
+    "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
+    "autopilot": (mission_ahead, ex_autopilot, ("autopilot.",)),
+}
+SETTABLE = [p for p in TABLE if p.access is Access.RW]
+
+
+def exercises_of(param: Param) -> list[str]:
+    return [name for name, (_, _, keys) in EXERCISES.items() if any(param.key == k or (k.endswith(".") and param.key.startswith(k)) for k in keys)]
+
+
+def candidates(param: Param) -> list[float]:
+    """New values to try, in the parameter's range and unlike the default."""
+    if param.kind is Kind.CHOICE:
+        return [float(n) for n in param.choices if n != param.default]
+    if param.kind is Kind.MASK:
+        return [float(m) for m in (0, 1, 3, 255) if m != param.default]
+    d, lo, hi = param.default, param.minimum, param.maximum
+    raw = [d * 2, d / 2, hi, lo, (lo + hi) / 2, d + 1, d - 1]
+    out = []
+    for v in raw:
+        v = min(max(v, lo), hi)
+        if param.kind is Kind.INT:
+            v = float(round(v))
+        if v != d and v not in out:
+            out.append(v)
+    return out
+
+
+def fresh_config() -> Config:
+    config = Config()
+    config.gcs.mission_store_path = ""  # no state files
+    return config
+
+
+def built(name: str, config: Config) -> Daemon:
+    daemon = build(config)
+    EXERCISES[name][0](daemon)
+    return daemon
+
+
+@cache
+def baseline(name: str) -> list:
+    return EXERCISES[name][1](built(name, fresh_config()))
+
+
+def test_every_settable_parameter_has_an_exercise():
+    missing = [p.name for p in SETTABLE if not exercises_of(p)]
+    assert not missing, f"parameters a GCS may set but no exercise reads: {missing}"
+
+
+@pytest.mark.parametrize("param", SETTABLE, ids=lambda p: p.name)
+def test_a_change_reaches_every_use(param: Param):
+    names = exercises_of(param)
+    for value in candidates(param):
+        differs = False
+        for name in names:
+            run = EXERCISES[name][1]
+            changed_later = built(name, fresh_config())
+            ok, reason = ConfigParams(changed_later.config).set_param(param.name, value)
+            assert ok, reason
+            from_start = fresh_config()
+            param.set(from_start, param.decode(value))
+            b, c = run(changed_later), run(built(name, from_start))
+            assert b == c, f"{param.name}={value:g} set after construction is not used like one set before ({name})"
+            differs |= c != baseline(name)
+        if differs:
+            return
+    pytest.fail(f"no exercise ({', '.join(names)}) depends on {param.name} for any of {candidates(param)}")
