@@ -214,11 +214,11 @@ class Autopilot:
     # ---- ground-station requests -----------------------------------------------------------------
 
     def arm(self, arm: bool, force: bool = False) -> Reply:
-        if arm and self.armed:
-            return ACCEPTED
         if arm and self.sensor_error is not None:  # not even forced: the rover cannot be driven
             self._say(f"PreArm: {self.sensor_error}", Severity.CRITICAL)
             return Reply(mav.MAV_RESULT_DENIED, self.sensor_error)
+        if arm and self.armed:
+            return ACCEPTED
         if arm and self.rangefinder_plan is None and not force:
             self._say("PreArm: rangefinders not known yet", Severity.CRITICAL)
             return Reply(mav.MAV_RESULT_TEMPORARILY_REJECTED, "rangefinders not known yet")

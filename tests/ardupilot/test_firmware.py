@@ -118,7 +118,7 @@ def test_the_daemons_default_wheel_map_is_caught_reversed_on_ardupilot(tmp_path)
         assert run.wait_for(lambda p: p.mode == RoverMode.AUTO, wall_timeout_s=20.0)
         assert run.wait_for(lambda p: p.mode == RoverMode.HOLD, wall_timeout_s=60.0), run.progress
         assert 5 not in run.progress.reached
-        # Disarmed, arming again is refused, even forced: the map must be fixed first.
+        # Arming again is refused, even forced: the map must be fixed first.
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0) == mav.MAV_RESULT_ACCEPTED
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, 21196) == mav.MAV_RESULT_DENIED
 
