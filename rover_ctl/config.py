@@ -131,7 +131,7 @@ class FailsafeParams:
 
     recovery_s: float = 2.0
     """A failsafe clears only after its cause has been gone this long (hysteresis)."""
-    vehicle_timeout_s: float = 1.0
+    vehicle_timeout_s: float = 0.4
     """Vehicle link silent (no message at all) for longer than this: motors neutral, hold."""
     gcs_timeout_s: float = 5.0
     """GCS heartbeat older than this, once one was seen: GCS lost (ArduPilot FS_GCS_TIMEOUT)."""
@@ -139,6 +139,13 @@ class FailsafeParams:
     """On GCS loss: "continue" the mission, "hold" or "rtl" (ArduPilot FS_GCS_ENABLE/FS_ACTION)."""
     rangefinder_timeout_s: float = 0.5
     """A rangefinder silent for longer than this is reported so the navigator treats that side as blocked."""
+    required_rangefinders: list[int] = field(default_factory=lambda: [-1])
+    """DISTANCE_SENSOR orientations that must keep reporting: one silent holds the rover, with a
+    STATUSTEXT naming it. ``[-1]`` (default): every rangefinder the rule base reads on this rover
+    (the rangefinder plan). A rangefinder the rule base reads that is not listed: while it is
+    silent its side counts as blocked and the rover goes on at ``degraded_speed_mps``."""
+    degraded_speed_mps: float = 0.5
+    """Speed limit while a rangefinder the rule base reads, but not a required one, is silent."""
     gps_timeout_s: float = 1.0
     """No GPS fix for longer than this: dead reckoning."""
     dead_reckoning_max_s: float = 20.0
@@ -391,6 +398,9 @@ class AutopilotParams:
     loiter_radius_m: float = 2.0
     """LOITER (and a GUIDED rover that has arrived) drives back once pushed farther than this from
     its point, until within half of it (ArduPilot LOIT_RADIUS)."""
+    mission_restart: int = 0
+    """Entering AUTO (ArduPilot MIS_RESTART): 0 resumes at the item the mission was on, also after
+    the daemon restarted (the item is stored beside the mission); 1 starts the mission over."""
     arming_max_distance_m: float = 1000.0
     """Pre-arm: a mission whose first waypoint, or a fence whose nearest point, is farther than this
     from home was made for another place: arming is refused."""

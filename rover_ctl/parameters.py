@@ -45,8 +45,8 @@ NAME_MAX = 16
 """PARAM_VALUE.param_id holds 16 characters."""
 MASK_BITS = 8
 """Rangefinder masks cover MAV_SENSOR_ORIENTATION 0-7, the yaw steps a rover's sensors use."""
-LEARN = -1
-"""A learnable mask's "learn it from the vehicle": the field holds ``[LEARN]``, the wire -1."""
+AUTO = -1
+"""A mask's automatic value (``Param.auto`` says what it means): the field holds ``[AUTO]``, the wire -1."""
 TRUE_WORDS, FALSE_WORDS = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
 
 
@@ -82,8 +82,8 @@ class Param:
     access: Access
     kind: Kind
     choices: Mapping[int, str] | None = None
-    learn: bool = False
-    """A mask that may also be ``[LEARN]`` (-1): learnt from what the vehicle reports."""
+    auto: str = ""
+    """For a mask that may also be ``[AUTO]`` (-1): what that means ("learn from the vehicle")."""
     description: str = ""
     default: float = 0.0
     """The MAVLink value of the dataclass default."""
@@ -110,7 +110,7 @@ class Param:
         if self.kind is Kind.CHOICE:
             return ", ".join(f"{number} {label}" for number, label in self.choices.items())
         if self.kind is Kind.MASK:
-            return f"bitmask, bits 0-{MASK_BITS - 1}" + (f"; {LEARN} learn from the vehicle" if self.learn else "")
+            return f"bitmask, bits 0-{MASK_BITS - 1}" + (f"; {AUTO} {self.auto}" if self.auto else "")
         if self.kind is Kind.BOOL:
             return "0 false, 1 true"
         units = f" {self.units}" if self.units else ""
@@ -130,8 +130,8 @@ class Param:
         if self.kind is Kind.CHOICE:
             return float(next(number for number, label in self.choices.items() if label == value))
         if self.kind is Kind.MASK:
-            if self.learn and list(value) == [LEARN]:
-                return float(LEARN)
+            if self.auto and list(value) == [AUTO]:
+                return float(AUTO)
             return float(sum(1 << int(bit) for bit in set(value)))
         return float(value)
 
@@ -143,8 +143,8 @@ class Param:
             raise ParamError(f"{number} is not a finite number")
         if self.kind is not Kind.FLOAT and number != int(number):
             raise ParamError(f"{_number_text(number)} is not a whole number ({self.range_text()})")
-        if self.learn and number == LEARN:
-            return [LEARN]
+        if self.auto and number == AUTO:
+            return [AUTO]
         if self.kind is Kind.CHOICE:
             if int(number) not in self.choices:
                 raise ParamError(f"{_number_text(number)} is not one of {self.range_text()}")
@@ -169,8 +169,8 @@ class Param:
             if word in TRUE_WORDS or word in FALSE_WORDS:
                 return word in TRUE_WORDS
             raise ParamError(f"expected true or false, got {value!r}")
-        if self.learn and (value == [LEARN] or (isinstance(value, str) and value.strip().lower() in ("learn", str(LEARN)))):
-            return [LEARN]
+        if self.auto and (value == [AUTO] or value == AUTO or (isinstance(value, str) and value.strip().lower() in ("auto", "learn", str(AUTO)))):
+            return [AUTO]
         if self.kind is Kind.MASK and (isinstance(value, (list, tuple)) or (isinstance(value, str) and ("," in value or "[" in value))):
             return self._bits(value)
         if isinstance(value, str):
@@ -250,6 +250,8 @@ _DECLARED: tuple[tuple, ...] = (
     ("failsafe.gcs_timeout_s", "FS_GCS_TIMEOUT", 0.5, 300.0, RW, {}),
     ("failsafe.gcs_action", "FS_ACTION", 0, 2, RW, {"choices": FS_ACTIONS}),
     ("failsafe.rangefinder_timeout_s", "FS_RNG_TIMEOUT", 0.05, 60.0, RW, {}),
+    ("failsafe.required_rangefinders", "FS_RNG_MASK", AUTO, 2**MASK_BITS - 1, RW, {"mask": True, "auto": "every one the rule base reads"}),
+    ("failsafe.degraded_speed_mps", "FS_RNG_SPEED", 0.0, 20.0, RW, {}),
     ("failsafe.gps_timeout_s", "FS_GPS_TIMEOUT", 0.1, 60.0, RW, {}),
     ("failsafe.dead_reckoning_max_s", "FS_DR_MAX", 0.0, 3600.0, RW, {}),
     ("failsafe.estimator_unhealthy_s", "FS_EKF_TIMEOUT", 0.0, 60.0, RW, {}),
@@ -326,9 +328,10 @@ _DECLARED: tuple[tuple, ...] = (
     ("link.wheel_right_index", "WHL_R_INDEX", 0, 15, START, {}),
     ("link.wheel_left_sign", "WHL_L_SIGN", -1.0, 1.0, START, {}),
     ("link.wheel_right_sign", "WHL_R_SIGN", -1.0, 1.0, START, {}),
-    ("link.rangefinders", "RNG_PRESENT", LEARN, 2**MASK_BITS - 1, START, {"mask": True, "learn": True}),
+    ("link.rangefinders", "RNG_PRESENT", AUTO, 2**MASK_BITS - 1, START, {"mask": True, "auto": "learn from the vehicle"}),
     ("link.rangefinder_discovery_s", "RNG_LEARN_TIME", 0.1, 60.0, START, {}),
     ("autopilot.loiter_radius_m", "LOIT_RADIUS", 0.1, 100.0, RW, {}),
+    ("autopilot.mission_restart", "MIS_RESTART", 0, 1, RW, {}),
     ("autopilot.arming_max_distance_m", "ARMING_MAX_DIST", 1.0, 1.0e6, RW, {}),
     ("estimator.glitch_max_s", "EKF_GLITCH_MAX", 0.0, 3600.0, RW, {}),
     ("estimator.glitch_innovation_tau_s", "EKF_GLITCH_TAU", 0.01, 60.0, RW, {}),
@@ -378,7 +381,7 @@ def _build() -> tuple[Param, ...]:
         else:
             kind = Kind.FLOAT
         param = Param(name, key, float(low), float(high), options.get("units", _units_of(field_name)), access, kind,
-                      options.get("choices"), options.get("learn", False), field_docs(cls).get(field_name, ""))  # fmt: skip
+                      options.get("choices"), options.get("auto", ""), field_docs(cls).get(field_name, ""))  # fmt: skip
         out.append(dataclasses.replace(param, default=param.encode(param.get(defaults))))
     return tuple(out)
 

@@ -117,6 +117,7 @@ class Daemon:
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
+        self._saved_seq: int | None = None
         self.log_clock = LogClock(lambda: self.link.vehicle_time_s if self.lockstep else None)
 
     @property
@@ -159,6 +160,9 @@ class Daemon:
         store = MissionStore(Path(store_path).expanduser()) if store_path else None
         signing = KeyStore(cfg.gcs.signing_key_path) if cfg.gcs.signing_key_path else None
         self.gcs = GcsLink(cfg.link.gcs_url, cfg.gcs, handlers=self, store=store, signing=signing)
+        if store is not None and (seq := store.load_progress(self.autopilot.mission)) is not None:
+            self._saved_seq = seq
+            self.autopilot.resume_from(seq)
         self._apply(self.autopilot.drain())
         if self.log_dir:
             self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog", clock=self.log_clock))
@@ -338,6 +342,7 @@ class Daemon:
                 log.log(logging.WARNING if event.severity <= Severity.WARNING else logging.INFO, "%s", event.text)
                 self.gcs.send_statustext(event.text, int(event.severity))
             elif isinstance(event, MissionCurrent):
+                self._save_progress(event.seq)  # stored before the GCS hears of it
                 self.gcs.send_mission_current(event.seq, int(event.state))
             elif isinstance(event, ItemReached):
                 self.gcs.send_mission_item_reached(event.seq)
@@ -346,6 +351,17 @@ class Daemon:
                 self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params, on_result=self._on_arm_result)
             elif kind in ("mode", "complete"):
                 log.info("%s %s at t=%.2f s", kind, fields, now)
+
+    def _save_progress(self, seq: int) -> None:
+        """Keep the current item beside the stored mission (MIS_RESTART 0 resumes there after a restart)."""
+        store = getattr(self.gcs, "store", None)
+        if store is None or seq == self._saved_seq or not self.autopilot.mission.items:
+            return
+        self._saved_seq = seq
+        try:
+            store.save_progress(self.autopilot.mission, seq)
+        except OSError as exc:
+            log.warning("%s: cannot save the mission's progress: %s", store.progress_path, exc)
 
     def _on_arm_result(self, result) -> None:
         if not result.accepted:

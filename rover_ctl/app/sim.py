@@ -123,6 +123,8 @@ class SimOptions:
     config_overrides: list[str] = field(default_factory=list)
     sitl_params: list[str] = field(default_factory=list)
     """NAME=VALUE for the emulator's --param (e.g. SIM_GPS_GLITCH_X=5)."""
+    mission_store: Path | None = None
+    """Where the daemon persists the mission (and its progress); None: not persisted."""
     signing_key: bytes | None = None
     """MAVLink 2 signing key of the GCS link, for the daemon (a key file in a private temporary
     folder, removed at the end) and this ground station. None: the daemon runs without signing
@@ -208,6 +210,8 @@ class SimRun:
         self._next_heartbeat_wall = 0.0
         self._next_heartbeat_sim = 0.0
         self._truth = TruthTail(self.out / "truth.jsonl")
+        self.daemon_log_run = self.out
+        """The daemon's run folder (``restart_daemon`` gives the second daemon its own)."""
 
     # ---- processes -------------------------------------------------------------------------
 
@@ -240,8 +244,8 @@ class SimRun:
     def _daemon_command(self) -> list[str]:
         o = self.options
         cmd = [*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{self.vehicle_port}",
-               "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-run", str(self.out),
-               "--mission-store", "", "--signing-key-file", str(self.signing_key_path) if self._key_dir else ""]  # fmt: skip
+               "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-run", str(self.daemon_log_run),
+               "--mission-store", str(o.mission_store or ""), "--signing-key-file", str(self.signing_key_path) if self._key_dir else ""]  # fmt: skip
         for item in o.config_overrides:
             cmd += ["--set", item]
         return cmd
@@ -274,6 +278,15 @@ class SimRun:
                 if time.monotonic() > deadline:
                     raise SimError(f"daemon: no heartbeat on the GCS link within {GCS_CONNECT_TIMEOUT_S:g} s ({exc}); see {self.out / 'daemon.log'}") from None
         self.gcs.upload(self.mission)
+
+    def restart_daemon(self, log_run: Path) -> None:
+        """Kill the daemon (SIGKILL: no clean shutdown, as a crash or a power cut) and start it
+        again with the same options, logging into ``log_run``; the emulator runs on."""
+        stop_process(self.daemon, signal.SIGKILL, STOP_TIMEOUT_S)
+        self.daemon_log_run = log_run
+        daemon_log = open(self.out / "daemon-restarted.log", "w")
+        self._logs.append(daemon_log)
+        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
 
     def _check_children(self) -> None:
         if self.sitl is not None and self.sitl.poll() is not None:

@@ -168,6 +168,7 @@ class Autopilot:
         self._station_en: EN | None = None  # LOITER / GUIDED: the point held
         self._guided_target_en: EN | None = None  # GUIDED: still driving to it
         self._returning = False  # station keeping: driving back to the station
+        self._resume_seq: int | None = None  # the stored mission's item before a restart (MIS_RESTART 0)
         self.rangefinder_plan: RangefinderPlan | None = None
         self.sensor_error: str | None = None
         """Why the rover cannot be driven (rule base vs rangefinders, reversed wheel map)."""
@@ -204,6 +205,23 @@ class Autopilot:
     def _sensor_seen(self, t_s: float) -> None:
         if self._sensors_since_s is None:
             self._sensors_since_s = t_s
+
+    def resume_from(self, seq: int) -> None:
+        """The stored mission was at item ``seq`` when the daemon stopped: with MIS_RESTART 0,
+        AUTO resumes there (the rover stays stopped until a ground station asks for AUTO)."""
+        if self.config.autopilot.mission_restart == 0:
+            self._resume_seq = seq
+            self._apply_resume()
+
+    def _apply_resume(self) -> None:
+        if self._resume_seq is None or self.executor is None:
+            return
+        seq, self._resume_seq = self._resume_seq, None
+        try:
+            self._executor_events(self.executor.set_current(seq))
+        except ValueError:
+            return  # the stored item no longer exists: start from the first
+        self._say(f"Mission resumes at item {seq}")
 
     def drain(self) -> list[Event]:
         """Events of the requests since the last step or drain, in order."""
@@ -273,6 +291,7 @@ class Autopilot:
         """A new mission, fence or rally list was stored: AUTO stops (HOLD), RTL goes on."""
         self.mission = mission
         self._mission_started = False
+        self._resume_seq = None
         if self.mode == RoverMode.AUTO:
             self._enter(RoverMode.HOLD, "mission changed")
         self._load_mission()
@@ -473,6 +492,9 @@ class Autopilot:
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()})
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
+        if decision.speed_limit_mps is not None:  # degraded sensing: a side is blind
+            speed_mps = min(speed_mps, decision.speed_limit_mps)
+            row.update(speed_limit_mps=speed_mps)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip
         self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
@@ -498,7 +520,9 @@ class Autopilot:
     def _enter(self, mode: RoverMode, reason: str, resume: bool = True) -> None:
         previous, self.mode = self.mode, mode
         if self.executor is not None:
-            if mode == RoverMode.AUTO and resume:
+            if mode == RoverMode.AUTO and resume and self.config.autopilot.mission_restart == 1 and previous != mode:
+                self._executor_events(self.executor.restart())  # MIS_RESTART 1: AUTO starts over
+            elif mode == RoverMode.AUTO and resume:
                 self._executor_events(self.executor.start())
             elif mode == RoverMode.RTL:
                 self._executor_events(self.executor.rtl())
@@ -538,6 +562,7 @@ class Autopilot:
                           if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y))  # fmt: skip
         total = sum(i.command in NAV_COMMANDS for i in self.mission.items)
         self._outbox.append(MissionLoaded(total, len(self.mission.items), waypoints))
+        self._apply_resume()
 
     def _executor_events(self, events) -> None:
         for event in events:
@@ -585,7 +610,7 @@ class Autopilot:
             self._say(self.sensor_error, Severity.CRITICAL)
             return
         self.rangefinder_plan = self.navigator.rangefinders = plan
-        self.failsafes.required_rangefinders = plan.required
+        self.failsafes.used_rangefinders = plan.required
         self._say(plan.describe(), Severity.INFO if plan.avoidance else Severity.WARNING)
 
     # ---- STATUSTEXT ----------------------------------------------------------------------------

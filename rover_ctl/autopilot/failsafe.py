@@ -24,7 +24,13 @@ API:
     Failsafes(params).update(now_s, inputs: FailsafeInputs) -> FailsafeDecision
     FailsafeDecision.action: Action, .reasons (active failsafe names), .events (new this step),
         .blocked_orientations (silent rangefinders: the navigator treats those sides as blocked),
-        .dead_reckoning, .replan (once, when a back-off ends: re-plan from here)
+        .dead_reckoning, .replan (once, when a back-off ends: re-plan from here), .speed_limit_mps
+        (degraded sensing: a silent rangefinder that is not required)
+
+Rangefinders: those the navigator reads (``used_rangefinders``, the rangefinder plan's, set by the
+autopilot) and those ``params.required_rangefinders`` names (``[-1]``: the used ones) are watched.
+A silent required one is HOLD; a silent used one that is not required blocks its side and limits
+the speed to ``degraded_speed_mps``; others are not watched.
 """
 
 from __future__ import annotations
@@ -92,6 +98,8 @@ class FailsafeDecision:
     replan: bool
     stuck_tries: int = 0
     """Back-offs so far in the current stuck episode (the daemon widens each re-plan's detour)."""
+    speed_limit_mps: float | None = None
+    """Degraded sensing: drive no faster than this (None: no failsafe limit)."""
 
 
 class _Latch:
@@ -129,9 +137,9 @@ class Failsafes:
         if params.fence_action not in FENCE_ACTIONS:
             raise ValueError(f"failsafe.fence_action: {params.fence_action!r} is not one of {', '.join(FENCE_ACTIONS)}")
         self.params = params  # read at every update: a changed parameter applies at the next step
-        self.required_rangefinders: frozenset[int] = frozenset()
-        """Orientations that must report: the rangefinder plan's (``rover_ctl.navigation.sensors``),
-        set by the autopilot once the rover's rangefinders are known; others are not watched."""
+        self.used_rangefinders: frozenset[int] = frozenset()
+        """Orientations the navigator reads: the rangefinder plan's (``rover_ctl.navigation.sensors``),
+        set by the autopilot once the rover's rangefinders are known."""
         self._vehicle = _Latch()
         self._gcs = _Latch()
         self._gps = _Latch()
@@ -171,22 +179,33 @@ class Failsafes:
         fence_action = FENCE_ACTIONS[p.fence_action]
         check(self._fence, "fence breach", not inputs.inside_fence, fence_action, p.fence_action)
 
-        required = self.required_rangefinders
-        ages = {o: math.inf for o in required} | {o: a for o, a in inputs.range_ages_s.items() if o in required}
-        for orientation in sorted(set(self._ranges) - set(ages)):  # no longer required
+        required = self.required_rangefinders()
+        watched = self.used_rangefinders | required
+        ages = {o: math.inf for o in watched} | {o: a for o, a in inputs.range_ages_s.items() if o in watched}
+        for orientation in sorted(set(self._ranges) - set(ages)):  # no longer watched
             if self._ranges.pop(orientation).active:
                 events.append(FailsafeEvent(f"FS rangefinder {orientation} cleared", Severity.INFO))
         for orientation in sorted(ages):
             rf = self._ranges.setdefault(orientation, _Latch())
             silent = ages[orientation] > p.rangefinder_timeout_s
-            check(rf, f"rangefinder {orientation}", silent, Action.NONE, "silent, side blocked")
+            if orientation in required:
+                check(rf, f"rangefinder {orientation}", silent, Action.HOLD, "silent, hold")
+            else:
+                check(rf, f"rangefinder {orientation}", silent, Action.NONE, "silent, side blocked")
         blocked = frozenset(o for o, rf in self._ranges.items() if rf.active)
+        degraded = any(rf.active and o not in required for o, rf in self._ranges.items())
 
         replan = self._stuck_step(now_s, inputs, events, actions)
 
         action = max(actions.values(), default=Action.NONE)
         reasons = tuple(actions)
-        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan, self._tries)
+        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan, self._tries,
+                                p.degraded_speed_mps if degraded else None)  # fmt: skip
+
+    def required_rangefinders(self) -> frozenset[int]:
+        """Orientations whose silence holds the rover (``params.required_rangefinders``; [-1]: the used ones)."""
+        listed = list(self.params.required_rangefinders)
+        return self.used_rangefinders if listed == [-1] else frozenset(listed)
 
     def _stuck_step(self, now_s: float, inputs: FailsafeInputs, events: list[FailsafeEvent], actions: dict[str, Action]) -> bool:
         """Commanded motion without progress: back off, re-plan; after ``stuck_max_tries``, hold."""

@@ -13,6 +13,7 @@ still loads, and the planner and executor leave its invalid parts out.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import tempfile
@@ -81,6 +82,12 @@ def from_json(data: Any, where: str) -> Mission:
     return Mission(items=items("items"), home=home, fence=items("fence"), rally=items("rally"))
 
 
+def mission_digest(mission: Mission) -> str:
+    """A short fingerprint of the mission's items: progress belongs to one mission."""
+    text = json.dumps(to_json(mission)["items"], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
 class MissionStore:
     """The store file at ``path`` (``~`` expanded; parent directories created on save)."""
 
@@ -118,6 +125,33 @@ class MissionStore:
             os.fsync(dir_fd)
         finally:
             os.close(dir_fd)
+
+    @property
+    def progress_path(self) -> Path:
+        return self.path.with_name(self.path.name + ".progress")
+
+    def save_progress(self, mission: Mission, seq: int) -> None:
+        """Remember that ``mission`` is at item ``seq`` (atomic; raises OSError if it cannot)."""
+        self.progress_path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.progress_path.name}.", suffix=".tmp", dir=self.path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump({"mission": mission_digest(mission), "seq": int(seq)}, fh)
+            os.replace(tmp, self.progress_path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    def load_progress(self, mission: Mission) -> int | None:
+        """The item ``mission`` was at when last saved; None if unknown or saved for another mission."""
+        try:
+            data = json.loads(self.progress_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+            return None
+        if not isinstance(data, dict) or data.get("mission") != mission_digest(mission):
+            return None
+        seq = data.get("seq")
+        return seq if isinstance(seq, int) and not isinstance(seq, bool) and seq >= 1 else None
 
     def quarantine(self) -> Path | None:
         """Move an unreadable store file aside and return where it went (None: no such file)."""

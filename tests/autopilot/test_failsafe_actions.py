@@ -121,16 +121,34 @@ def test_gps_loss_dead_reckons_then_holds():
     assert bench.run(5.0, until=lambda b: "FS GPS lost too long cleared" in b.texts)
 
 
-def test_silent_rangefinder_blocks_its_side_for_the_navigator():
-    bench = driving()
+def test_silent_rangefinder_not_required_blocks_its_side_and_slows_down():
+    config = rover_config()
+    config.failsafe.required_rangefinders = [2, 6]  # the front one may fail: go on carefully
+    bench = driving(config)
     del bench.ranges_m[0]  # the front rangefinder stops reporting (its last reading: nothing in range)
-    bench.run(bench.config.failsafe.rangefinder_timeout_s + 0.1)
+    bench.run(config.failsafe.rangefinder_timeout_s + 0.1)
     assert 0 in bench.autopilot.decision.blocked_orientations and "FS rangefinder 0: silent, side blocked" in bench.texts
+    assert bench.autopilot.decision.speed_limit_mps == config.failsafe.degraded_speed_mps
     assert bench.outputs[-1].log_row["range_front_m"] == math.inf  # logged as last heard...
     bench.run(2.0)
     assert bench.speed_mps < 0.3  # ...but the navigator treats the front as blocked: no more driving ahead
     bench.ranges_m[0] = math.inf
     assert bench.run(5.0, until=lambda b: "FS rangefinder 0 cleared" in b.texts)
+    bench.run(3.0)
+    assert bench.speed_mps > 0.5
+
+
+def test_silent_required_rangefinder_holds_within_a_second_and_resumes():
+    bench = driving()  # FS_RNG_MASK -1: every rangefinder the rule base reads is required
+    silent_from = bench.t_s
+    for orientation in list(bench.ranges_m):
+        del bench.ranges_m[orientation]  # every rangefinder fails
+    assert bench.run(1.0, until=lambda b: action(b) == Action.HOLD)
+    assert bench.t_s - silent_from <= 1.0 and "FS rangefinder 0: silent, hold" in bench.texts
+    bench.run(2.0)
+    assert abs(bench.speed_mps) < 0.05 and bench.autopilot.mode == RoverMode.AUTO  # held, mission kept
+    bench.ranges_m.update(dict.fromkeys((0, 1, 2, 4, 6, 7), math.inf))
+    assert bench.run(5.0, until=lambda b: action(b) == Action.NONE)
     bench.run(3.0)
     assert bench.speed_mps > 0.5
 

@@ -122,3 +122,27 @@ def test_mission_current_is_emitted_on_change_not_every_step():
     currents = [(e.seq, e.state) for e in bench.of_type(MissionCurrent)]
     assert currents[-1] == (1, MissionState.ACTIVE)
     assert all(a != b for a, b in zip(currents, currents[1:])) and len(currents) <= 4  # 125 steps, no repeats
+
+
+def test_mission_resumes_at_the_stored_item_after_a_restart():
+    """MIS_RESTART 0: a daemon started again resumes at the item the stored mission was on."""
+    bench = Bench()
+    bench.autopilot.mission_changed(mission((0.0, 6.0), (0.0, 12.0), (0.0, 18.0)), 0)
+    bench.autopilot.resume_from(2)  # before home: applied once the executor exists
+    bench.ready()
+    assert bench.autopilot.mode == RoverMode.HOLD and bench.autopilot.executor.current_seq == 2
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    assert bench.run(60.0, until=lambda b: b.autopilot.state().mission_state == MissionState.COMPLETE)
+    assert [e.seq for e in bench.of_type(ItemReached)] == [2, 3]  # item 1 was done before the restart
+
+
+def test_mis_restart_1_starts_over_on_entering_auto():
+    bench = Bench()
+    bench.config.autopilot.mission_restart = 1
+    bench.autopilot.mission_changed(mission((0.0, 6.0), (0.0, 12.0)), 0)
+    bench.autopilot.resume_from(2)  # ignored: MIS_RESTART 1
+    bench.ready()
+    assert bench.autopilot.executor.current_seq == 1
+    bench.autopilot.executor.set_current(2)
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    assert bench.autopilot.executor.current_seq == 1

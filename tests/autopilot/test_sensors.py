@@ -33,7 +33,7 @@ def test_arming_waits_for_the_rangefinders_then_plans_from_what_reported():
     bench.run(bench.autopilot.config.link.rangefinder_discovery_s + 0.1)
     plan = bench.autopilot.rangefinder_plan
     assert plan is not None and plan.avoidance and plan.required == {0, 1, 2, 6, 7}
-    assert bench.autopilot.failsafes.required_rangefinders == plan.required
+    assert bench.autopilot.failsafes.used_rangefinders == plan.required
     assert bench.request(bench.autopilot.arm(True)).accepted
 
 

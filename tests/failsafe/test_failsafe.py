@@ -68,17 +68,33 @@ def test_no_gcs_failsafe_before_a_gcs_was_ever_seen():
     assert step(fs, 100.0, gcs_age_s=math.inf).action is Action.NONE
 
 
-def test_silent_rangefinder_reports_that_side_blocked():
-    fs = Failsafes(PARAMS)
-    fs.required_rangefinders = frozenset({0, 2, 4, 6})  # the autopilot sets the rangefinder plan's
+def test_silent_rangefinder_not_required_blocks_its_side_at_the_degraded_speed():
+    fs = Failsafes(dataclasses.replace(PARAMS, required_rangefinders=[0], degraded_speed_mps=0.4))
+    fs.used_rangefinders = frozenset({0, 2, 4, 6})  # the autopilot sets the rangefinder plan's
     d = step(fs, 0.0, range_ages_s={0: 0.02, 2: 0.7, 4: 0.02, 6: 0.02})
-    assert d.blocked_orientations == {2} and d.action is Action.NONE
+    assert d.blocked_orientations == {2} and d.action is Action.NONE and d.speed_limit_mps == 0.4
     assert texts(d) == ["FS rangefinder 2: silent, side blocked"]
-    # A required rangefinder never heard from is blocked too; one not required is not watched.
+    # A used rangefinder never heard from is blocked too; one not used is not watched.
     d = step(fs, 0.1, range_ages_s={0: 0.02, 1: 0.9, 2: 0.02})
     assert d.blocked_orientations == {2, 4, 6}
     assert step(fs, 2.1, range_ages_s=FRESH_RANGES | {1: 0.9}).blocked_orientations == {4, 6}
-    assert step(fs, 4.2, range_ages_s=FRESH_RANGES).blocked_orientations == set()
+    d = step(fs, 4.2, range_ages_s=FRESH_RANGES)
+    assert d.blocked_orientations == set() and d.speed_limit_mps is None
+
+
+def test_silent_required_rangefinder_holds_and_says_which():
+    fs = Failsafes(PARAMS)  # required_rangefinders [-1]: every one the navigator reads
+    fs.used_rangefinders = frozenset({0, 2, 4, 6})
+    d = step(fs, 0.0, range_ages_s={0: 0.02, 2: 0.7, 4: 0.02, 6: 0.02})
+    assert d.action is Action.HOLD and d.reasons == ("rangefinder 2",) and d.blocked_orientations == {2}
+    assert texts(d) == ["FS rangefinder 2: silent, hold"]
+    assert step(fs, 0.5, range_ages_s=FRESH_RANGES).action is Action.HOLD  # until recovery_s of readings
+    d = step(fs, 2.6, range_ages_s=FRESH_RANGES)
+    assert d.action is Action.NONE and texts(d) == ["FS rangefinder 2 cleared"]
+    # Listed but not used (the rover lacks it): never heard, so the rover holds.
+    fs = Failsafes(dataclasses.replace(PARAMS, required_rangefinders=[0, 4]))
+    fs.used_rangefinders = frozenset({0})
+    assert step(fs, 0.0, range_ages_s={0: 0.02}).action is Action.HOLD
 
 
 def test_no_rangefinder_is_required_until_the_plan_says_so():

@@ -80,7 +80,7 @@ def wp(east_m: float, north_m: float, radius_m: float = 0.0) -> MissionItem:
 
 def ex_failsafes(d: Daemon) -> list:
     fs, trace = d.autopilot.failsafes, []
-    fs.required_rangefinders = frozenset({0, 1, 2, 4, 6})  # as a rangefinder plan sets them
+    fs.used_rangefinders = frozenset({0, 1, 2, 4, 6})  # as a rangefinder plan sets them
     position = [0.0, 0.0]
     for k in range(900):
         t = k * 0.1
@@ -103,8 +103,14 @@ def ex_failsafes(d: Daemon) -> list:
         )
         decision = fs.update(t, inputs)
         trace.append((decision.action, decision.reasons, [e.text for e in decision.events], decision.blocked_orientations,
-                      decision.dead_reckoning, decision.replan, decision.stuck_tries))  # fmt: skip
+                      decision.dead_reckoning, decision.replan, decision.stuck_tries, decision.speed_limit_mps))  # fmt: skip
     return trace
+
+
+def ex_degraded(d: Daemon) -> list:
+    """The failsafe run again on a rover whose front rangefinder may fail (not required)."""
+    d.config.failsafe.required_rangefinders = [2, 4, 6]
+    return ex_failsafes(d)
 
 
 def mission_for_executor(d: Daemon) -> None:
@@ -250,7 +256,14 @@ def ex_autopilot(d: Daemon) -> list:
     ap._station_en, ap._guided_target_en, ap._returning = (0.0, 0.0), None, False
     for k in range(60):
         trace.append(ap._station_goal((0.1 * min(k, 60 - k), 0.0)))
+    ap.executor.set_current(2)
+    ap._enter(RoverMode.AUTO, "test")  # MIS_RESTART: resume at item 2 or start over
+    trace.append(ap.executor.current_seq)
     return trace
+
+
+def two_ahead(d: Daemon) -> None:
+    with_mission(d, [wp(0, 20), wp(10, 20)])
 
 
 def no_mission(d: Daemon) -> None:
@@ -268,6 +281,7 @@ def mission_ahead(d: Daemon) -> None:
 EXERCISES = {
     # name: (what the daemon has built before the change, the exercise after it, keys it reads)
     "failsafes": (no_mission, ex_failsafes, ("failsafe.",)),
+    "degraded": (no_mission, ex_degraded, ("failsafe.degraded_speed_mps",)),
     "executor": (mission_for_executor, ex_executor, ("executor.", "robot.max_wheel_rpm", "robot.wheel_radius_m")),
     "navigator": (no_mission, ex_navigator, ("navigator.", "robot.max_wheel_rpm", "robot.wheel_radius_m")),
     "wheels": (no_mission, ex_wheels, ("wheel_control.", "robot.wheel_radius_m")),
@@ -275,7 +289,7 @@ EXERCISES = {
     "planner": (mission_for_planner, ex_planner, ("planner.", "robot.footprint_width_m")),
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
-    "autopilot": (mission_ahead, ex_autopilot, ("autopilot.",)),
+    "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
 
