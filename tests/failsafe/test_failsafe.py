@@ -32,8 +32,8 @@ def test_all_healthy_means_no_action_and_no_events():
 
 def test_vehicle_link_silent_neutral_then_resume_after_recovery():
     fs = Failsafes(PARAMS)
-    assert step(fs, 0.0, vehicle_age_s=0.9).action is Action.NONE
-    d = step(fs, 0.2, vehicle_age_s=1.1)
+    assert step(fs, 0.0, vehicle_age_s=0.35).action is Action.NONE  # vehicle_timeout_s 0.4
+    d = step(fs, 0.2, vehicle_age_s=0.45)
     assert d.action is Action.NEUTRAL and d.reasons == ("vehicle link",)
     assert texts(d) == ["FS vehicle link: motors neutral"] and d.events[0].severity is Severity.CRITICAL
     assert step(fs, 5.0, vehicle_age_s=0.01).action is Action.NEUTRAL  # back, recovery starts
