@@ -21,6 +21,9 @@ JUMP = ROOT / "missions" / "cmac_jump.waypoints"
 HOME = (-35.363261, 149.165230, 584.0)
 NEAR_M = 3.0
 """Arrival within the acceptance radius (2 m) of the daemon's estimate, each about a metre off truth."""
+TRUTH_NEAR_M = 4.0
+"""Where the rover stands at the end, by truth: within the acceptance radius of the estimate (2 m),
+plus the estimate's error against truth (the emulator's GPS: up to about 1.5 m), plus braking."""
 
 pytestmark = pytest.mark.sitl
 
@@ -93,7 +96,7 @@ def test_cli_arms_and_switches_modes_and_guided_drives_to_each_kind_of_target(tm
         assert disarm.returncode == 0, disarm
 
     there = truth_at(out)
-    assert math.dist(there, (4.0, 4.0)) < NEAR_M
+    assert math.dist(there, (4.0, 4.0)) < TRUTH_NEAR_M
     events = read_jsonl(out / "events.jsonl")
     assert [e["name"] for e in events if e["type"] == "mode"] == ["GUIDED", "HOLD"]
     assert any(e["type"] == "plan" and e["goal_seq"] == 0 for e in events)
