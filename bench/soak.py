@@ -41,6 +41,7 @@ from typing import Callable, Iterator
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
+from rover_ctl.mavlink.gcs import HANDLED as GCS_HANDLED  # noqa: E402
 from sitl.launch import STOP_TIMEOUT_S, SitlProcess, free_port, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
 
@@ -55,12 +56,8 @@ PROBE_RETRY_S = 0.5
 SILENCE_CRASH_S = 3.0
 """No HEARTBEAT for this long (the period is 1 s) counts as a crash."""
 START_TIMEOUT_S = 60.0
-HANDLED = (
-    "HEARTBEAT", "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST",
-    "MISSION_REQUEST_LIST", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "MISSION_ACK", "COMMAND_LONG", "COMMAND_INT",
-    "SET_MODE", "REQUEST_DATA_STREAM", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
-    "SET_POSITION_TARGET_GLOBAL_INT",
-)  # fmt: skip
+HANDLED = GCS_HANDLED
+"""Every message type the daemon's GCS link acts on."""
 COMMANDS = (mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_CMD_DO_SET_MODE, mav.MAV_CMD_MISSION_START, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH,
             mav.MAV_CMD_DO_SET_MISSION_CURRENT, mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_SET_MESSAGE_INTERVAL,
             mav.MAV_CMD_GET_HOME_POSITION, mav.MAV_CMD_DO_REPOSITION)  # fmt: skip

@@ -15,10 +15,10 @@ file with any bad line raises ``ParamStoreError`` and ``quarantine`` moves it as
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 from rover_ctl.config import Config
+from rover_ctl.mission.store import write_atomically
 from rover_ctl.parameters import ParamError, format_parm, parse_parm
 
 FILE_NAME = "params.parm"
@@ -55,22 +55,7 @@ class ParamStore:
 
     def save(self, values: dict[str, float]) -> None:
         """Replace the file with ``values`` atomically; OSError if it cannot be written."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", dir=self.path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as out:
-                out.write(format_parm(values, HEADER))
-                out.flush()
-                os.fsync(out.fileno())
-            os.replace(tmp, self.path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        directory = os.open(self.path.parent, os.O_RDONLY)
-        try:
-            os.fsync(directory)
-        finally:
-            os.close(directory)
+        write_atomically(self.path, format_parm(values, HEADER))
 
     def quarantine(self) -> Path | None:
         """Move the file aside to the first free ``.corrupt[.N]`` name; None if that failed."""

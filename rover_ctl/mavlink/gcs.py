@@ -63,6 +63,10 @@ from rover_ctl.vocabulary import RoverMode, mav
 
 log = logging.getLogger(__name__)
 
+HANDLED = ("HEARTBEAT", *sorted(MissionService.HANDLED), *commands.HANDLED, "REQUEST_DATA_STREAM", *params.HANDLED,
+           "SET_POSITION_TARGET_GLOBAL_INT")  # fmt: skip
+"""Every message type the GCS link acts on (the fuzz suite and the soak bench send each)."""
+
 GUIDED_ITEMS = ("MISSION_ITEM_INT", "MISSION_ITEM")
 GUIDED_ITEM_CURRENT = 2
 """MISSION_ITEM.current = 2 marks a GUIDED destination, not an upload (ArduPilot's convention)."""

@@ -82,6 +82,27 @@ def from_json(data: Any, where: str) -> Mission:
     return Mission(items=items("items"), home=home, fence=items("fence"), rally=items("rally"))
 
 
+def write_atomically(path: Path, text: str) -> None:
+    """Replace ``path`` with ``text`` so that a crash leaves the old file or the new one, never a
+    mix: a temporary file beside it, fsync, rename, fsync of the directory. OSError if it cannot."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
 def mission_digest(mission: Mission) -> str:
     """A short fingerprint of the mission's items: progress belongs to one mission."""
     text = json.dumps(to_json(mission)["items"], sort_keys=True)
@@ -109,22 +130,7 @@ class MissionStore:
 
     def save(self, mission: Mission) -> None:
         """Atomically replace the store with ``mission`` (raises OSError if it cannot)."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(to_json(mission), fh, indent=1)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, self.path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        dir_fd = os.open(self.path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
+        write_atomically(self.path, json.dumps(to_json(mission), indent=1))
 
     @property
     def progress_path(self) -> Path:
@@ -132,15 +138,7 @@ class MissionStore:
 
     def save_progress(self, mission: Mission, seq: int) -> None:
         """Remember that ``mission`` is at item ``seq`` (atomic; raises OSError if it cannot)."""
-        self.progress_path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.progress_path.name}.", suffix=".tmp", dir=self.path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump({"mission": mission_digest(mission), "seq": int(seq)}, fh)
-            os.replace(tmp, self.progress_path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_atomically(self.progress_path, json.dumps({"mission": mission_digest(mission), "seq": int(seq)}))
 
     def load_progress(self, mission: Mission) -> int | None:
         """The item ``mission`` was at when last saved; None if unknown or saved for another mission."""

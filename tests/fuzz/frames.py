@@ -16,14 +16,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from hypothesis import strategies as st  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
+from rover_ctl.mavlink.gcs import HANDLED as GCS_HANDLED  # noqa: E402
 from rover_ctl.mavlink.inbound import ROVER_MODES  # noqa: E402
 
-HANDLED = (
-    "HEARTBEAT", "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST",
-    "MISSION_REQUEST_LIST", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "MISSION_ACK", "COMMAND_LONG", "COMMAND_INT",
-    "SET_MODE", "REQUEST_DATA_STREAM", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
-    "SET_POSITION_TARGET_GLOBAL_INT",
-)  # fmt: skip
+HANDLED = GCS_HANDLED
 """Every message type the daemon's GCS link acts on."""
 OTHERS = ("RC_CHANNELS_OVERRIDE", "MANUAL_CONTROL", "SETUP_SIGNING", "FILE_TRANSFER_PROTOCOL")
 """A few it does not handle (must be ignored)."""
