@@ -137,9 +137,7 @@ class FirmwareRun(SimRun):
         if self.workdir.exists():
             shutil.rmtree(self.workdir)
         self.workdir.mkdir(parents=True)
-        daemon_log = open(self.out / "daemon.log", "w")
-        self._logs.append(daemon_log)
-        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
+        self._start_daemon()
         self.watcher = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self._truth_file = open(self.out / "truth.jsonl", "w", encoding="utf-8")
@@ -152,24 +150,10 @@ class FirmwareRun(SimRun):
         self._connect_gcs()
         self.gcs.upload(self.mission)
 
-    def _connect_gcs(self) -> None:
-        from rover_ctl.mavlink.mission_client import MissionClient
-
-        self.gcs = MissionClient(self.gcs_url)
-        deadline = time.monotonic() + 30.0
-        while True:
-            self._check_children()
-            try:
-                self.gcs.connect()
-                return
-            except Exception as exc:  # MissionClientError: the daemon is not up yet
-                if time.monotonic() > deadline:
-                    raise SimError(f"daemon: no heartbeat on the GCS link ({exc}); see {self.out / 'daemon.log'}") from None
-
     def _check_children(self) -> None:
-        for name, proc, log_name in (("ardurover", self.sitl, "sitl.log"), ("rover-ctl run", self.daemon, "daemon.log")):
+        for name, proc, log_path in (("ardurover", self.sitl, self.out / "sitl.log"), ("rover-ctl run", self.daemon, self.daemon_output)):
             if proc is not None and proc.poll() is not None:
-                text = (self.out / log_name).read_text(errors="replace").strip().splitlines()
+                text = log_path.read_text(errors="replace").strip().splitlines()
                 raise SimError(f"{name} exited with status {proc.returncode}: {text[-1] if text else 'no output'}")
 
     def stop(self) -> None:

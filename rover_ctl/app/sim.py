@@ -211,6 +211,8 @@ class SimRun:
         self._next_heartbeat_sim = 0.0
         self._truth = TruthTail(self.out / "truth.jsonl")
         self.daemon_log_run = self.out
+        self.daemon_output = self.out / "daemon.log"
+        """The daemon's stdout and stderr (its log lines), quoted when it fails."""
         """The daemon's run folder (``restart_daemon`` gives the second daemon its own)."""
 
     # ---- processes -------------------------------------------------------------------------
@@ -261,38 +263,45 @@ class SimRun:
                                    stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
         except SitlError as exc:
             raise SimError(str(exc)) from None
-        daemon_log = open(self.out / "daemon.log", "w")
-        self._logs.append(daemon_log)
-        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
+        self._start_daemon()
         self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        self._connect_gcs()
+        self.gcs.upload(self.mission)
+
+    def _start_daemon(self) -> None:
+        daemon_log = open(self.daemon_output, "w")
+        self._logs.append(daemon_log)
+        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
+
+    def _connect_gcs(self) -> None:
+        """Our GCS connection, once the daemon heartbeats on its GCS link."""
         self.gcs = MissionClient(self.gcs_url, signing_key=self.options.signing_key)
         deadline = time.monotonic() + GCS_CONNECT_TIMEOUT_S
         while True:
             self._check_children()
             try:
                 self.gcs.connect()
-                break
+                return
             except Exception as exc:  # MissionClientError: not up yet
                 if time.monotonic() > deadline:
-                    raise SimError(f"daemon: no heartbeat on the GCS link within {GCS_CONNECT_TIMEOUT_S:g} s ({exc}); see {self.out / 'daemon.log'}") from None
-        self.gcs.upload(self.mission)
+                    raise SimError(f"daemon: no heartbeat on the GCS link within {GCS_CONNECT_TIMEOUT_S:g} s ({exc}); see {self.daemon_output}") from None
 
     def restart_daemon(self, log_run: Path) -> None:
         """Kill the daemon (SIGKILL: no clean shutdown, as a crash or a power cut) and start it
         again with the same options, logging into ``log_run``; the emulator runs on."""
         stop_process(self.daemon, signal.SIGKILL, STOP_TIMEOUT_S)
         self.daemon_log_run = log_run
-        daemon_log = open(self.out / "daemon-restarted.log", "w")
-        self._logs.append(daemon_log)
-        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
+        self.daemon_output = Path(log_run) / "daemon.log"
+        self.daemon_output.parent.mkdir(parents=True, exist_ok=True)
+        self._start_daemon()
 
     def _check_children(self) -> None:
         if self.sitl is not None and self.sitl.poll() is not None:
             raise SimError(f"rover-sitl exited with status {self.sitl.returncode}: {self.sitl.last_error()}")
         if self.daemon is not None and self.daemon.poll() is not None:
-            text = (self.out / "daemon.log").read_text(errors="replace").strip().splitlines()
+            text = self.daemon_output.read_text(errors="replace").strip().splitlines()
             raise SimError(f"rover-ctl run exited with status {self.daemon.returncode}: {text[-1] if text else 'no output'}")
 
     def stop(self) -> None:
@@ -455,7 +464,7 @@ class SimRun:
             if wall_end is not None and time.monotonic() >= wall_end:
                 return False
             if time.monotonic() - self._last_rx_wall > STALL_TIMEOUT_S:
-                raise SimError(f"no message from the daemon for {STALL_TIMEOUT_S:g} s; see {self.out / 'daemon.log'}")
+                raise SimError(f"no message from the daemon for {STALL_TIMEOUT_S:g} s; see {self.daemon_output}")
             self.poll()
             if on_tick:
                 on_tick(self.progress)

@@ -365,7 +365,7 @@ class Autopilot:
             dt_s = max(t_s - self._last_step_s, 1e-3)
         self._last_step_s = t_s
         self._pose, self._ranges = pose, readings.ranges
-        if readings.ranges:
+        if self._sensors_since_s is None and readings.ranges:
             self._sensor_seen(min(r.time_s for r in readings.ranges.values()))
         since = self._sensors_since_s
         if self.rangefinder_plan is None and self.sensor_error is None and since is not None \
