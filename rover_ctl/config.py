@@ -335,6 +335,15 @@ class DaemonParams:
 
     control_rate_hz: float = 25.0
     """Control steps per second of vehicle (sensor) time."""
+    loop_rate_window_s: float = 2.0
+    """Vehicle time over which the control loop's achieved rate is measured
+    (``rover_ctl.autopilot.loop_rate``)."""
+    slow_loop_fraction: float = 0.8
+    """The loop counts as slow (STATUSTEXT warning, speed limit) below this share of
+    ``control_rate_hz``; it recovers above the midpoint between this and the full rate."""
+    max_step_travel_m: float = 0.1
+    """While the loop is slow, the speed is limited so that the rover moves at most this far
+    between two control steps (2.5 m/s at 25 Hz: a loop that keeps up is never limited)."""
     vehicle_wait_s: float = 30.0
     """Start-up: give up when no vehicle heartbeat arrives within this (wall clock)."""
     command_timeout_s: float = 0.5

@@ -75,6 +75,11 @@ def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(values**2))) if values.size else math.nan
 
 
+def _min(values: np.ndarray) -> float:
+    values = values[np.isfinite(values)]
+    return round(float(values.min()), 2) if values.size else math.nan
+
+
 def _path_length(east: np.ndarray, north: np.ndarray) -> float:
     return float(np.sum(np.hypot(np.diff(east), np.diff(north)))) if east.size > 1 else 0.0
 
@@ -172,6 +177,7 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
         "gps_bias_rms_m": round(_rms(np.array(gps_bias)), 3),
         "heading_rmse_deg": round(math.degrees(_rms(heading_err)), 2),
         "control_rate_hz": round((steps.size - 1) / span_s, 2) if span_s > 0 else math.nan,
+        "control_rate_min_hz": _min(c.get("loop_rate_hz", np.array([]))[active] if "loop_rate_hz" in c else np.array([])),
         "control_gap_max_s": round(float(np.max(np.diff(steps))), 3) if steps.size > 1 else math.nan,
         "loop_latency_p99_ms": round(float(np.percentile(latency, 99)), 3) if latency.size else math.nan,
         "waypoints_reached": len(reached),

@@ -44,6 +44,7 @@ from rover_ctl.autopilot.events import (
 from rover_ctl.autopilot.executor import NAV_COMMANDS, EventKind, MissionExecutor
 from rover_ctl.autopilot.executor import Mode as ExecutorMode
 from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInputs, Failsafes
+from rover_ctl.autopilot.loop_rate import LoopRate, LoopRateState
 from rover_ctl.config import Config
 from rover_ctl.estimation.estimator import Pose
 from rover_ctl.estimation.frame import LocalFrame
@@ -65,7 +66,7 @@ LOG_COLUMNS = (
     "est_healthy", "gps_ok", "goal_seq", "goal_east_m", "goal_north_m", "target_east_m", "target_north_m",
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
-    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "latency_ms",
+    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "latency_ms",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
@@ -142,6 +143,8 @@ class Autopilot:
         self.wheels = WheelController(lambda: robot.wheel_radius_m, config.wheel_control)
         self.navigator = Navigator(rulebase, config.navigator, lambda: robot.max_wheel_rpm, lambda: robot.wheel_radius_m)
         self.failsafes = Failsafes(config.failsafe)
+        self.loop_rate = LoopRate(config.daemon)
+        self._loop: LoopRateState | None = None
         self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
         self.mode = RoverMode.HOLD
         self.armed = False
@@ -365,6 +368,10 @@ class Autopilot:
             dt_s = max(t_s - self._last_step_s, 1e-3)
         self._last_step_s = t_s
         self._pose, self._ranges = pose, readings.ranges
+        self._loop = loop = self.loop_rate.step(t_s)
+        if loop.changed:
+            daemon = self.config.daemon
+            self._say(loop.text(daemon.control_rate_hz, daemon.max_step_travel_m), Severity.WARNING if loop.slow else Severity.INFO)
         if self._sensors_since_s is None and readings.ranges:
             self._sensor_seen(min(r.time_s for r in readings.ranges.values()))
         since = self._sensors_since_s
@@ -374,6 +381,8 @@ class Autopilot:
         decision = self._failsafe(t_s, pose, readings)
         row: dict[str, Any] = dict.fromkeys(LOG_COLUMNS, "")
         row.update(t_s=t_s, mode=int(self.mode), armed=int(self.armed), failsafe="+".join(decision.reasons))
+        if loop.rate_hz is not None:
+            row.update(loop_rate_hz=round(loop.rate_hz, 2))
         if pose is not None:
             row.update(est_east_m=pose.east_m, est_north_m=pose.north_m, est_heading_rad=pose.heading_rad,
                        est_speed_mps=pose.speed_mps, est_healthy=int(pose.healthy), gps_ok=int(pose.gps_ok))  # fmt: skip
@@ -494,6 +503,9 @@ class Autopilot:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
         if decision.speed_limit_mps is not None:  # degraded sensing: a side is blind
             speed_mps = min(speed_mps, decision.speed_limit_mps)
+            row.update(speed_limit_mps=speed_mps)
+        if self._loop is not None and self._loop.speed_limit_mps is not None:  # slow loop: bounded travel per step
+            speed_mps = min(speed_mps, self._loop.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip

@@ -93,12 +93,16 @@ def test_at_50x_the_loop_degrades_but_the_mission_completes(tmp_path, emulator):
     firmware and the ground station). The link then keeps only the newest reading of each kind
     (rover_ctl.mavlink.vehicle), so the loop steers on fresh data at a lower rate instead of
     falling ever further behind (before: the rover ran away, 835 m driven for a 180 m mission).
-    Asserted: every waypoint, no runaway (path within 1.5x the emulator's), and the report says
-    the loop ran below its configured rate. Tracking figures are in docs/BENCHMARKS.md."""
+    Asserted: every waypoint, no runaway (path within 1.5x the emulator's), and the daemon says
+    so whenever its measured rate fell below SCHED_SLOW_FRAC of the target (the warning, and
+    the speed limited to SCHED_STEP_TRVL per step). Tracking figures are in docs/BENCHMARKS.md."""
     metrics = run_firmware(tmp_path, 50, "none")
     assert metrics["complete"] and metrics["reached_seqs"] == [1, 2, 3, 4, 5], metrics
     assert metrics["path_length_m"] <= 1.5 * emulator["path_length_m"], (metrics, emulator)
     assert 0 < metrics["control_rate_hz"], metrics
+    warnings = [e["text"] for e in _events(tmp_path / "run") if e.get("text", "").startswith("Control loop slow")]
+    if metrics["control_rate_min_hz"] < 0.8 * 25.0:
+        assert warnings, metrics
 
 
 def test_first_leg_in_real_time(tmp_path, emulator):

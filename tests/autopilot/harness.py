@@ -73,6 +73,8 @@ class Bench:
     """None: the vehicle arms as asked (ArmRequest events); else fixed."""
     frozen: bool = False
     """The rover does not move whatever it is told (stuck against something)."""
+    step_period_s: float | None = None
+    """Vehicle time between two steps; None: the configured control rate (a loop that keeps up)."""
     events: list[Event] = field(default_factory=list)
     outputs: list[StepOutput] = field(default_factory=list)
 
@@ -133,7 +135,7 @@ class Bench:
                 self.armed = event.arm
 
     def step(self) -> StepOutput:
-        dt_s = 1.0 / self.config.daemon.control_rate_hz
+        dt_s = self.step_period_s or 1.0 / self.config.daemon.control_rate_hz
         self.autopilot.on_vehicle(self.armed if self.vehicle_armed is None else self.vehicle_armed)
         self.autopilot.on_wheels(WheelDistance(self.t_s, self.left_m, self.right_m))
         # A silent rangefinder's last reading stays, growing old (as the daemon keeps it).

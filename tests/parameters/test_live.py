@@ -249,6 +249,16 @@ def ex_daemon(d: Daemon) -> list:
     return [steps, [dataclasses.astuple(h) for h in holds], dataclasses.astuple(command)]
 
 
+def ex_loop_rate(d: Daemon) -> list:
+    """The autopilot's loop-rate monitor through a slow stretch (window, threshold, speed limit)."""
+    monitor, trace, t_s = d.autopilot.loop_rate, [], 0.0
+    for rate_hz, seconds in ((25.0, 3.0), (21.0, 3.0), (12.0, 3.0), (23.0, 6.0)):
+        for _ in range(round(rate_hz * seconds)):
+            trace.append(dataclasses.astuple(monitor.step(t_s)))
+            t_s += 1.0 / rate_hz
+    return trace
+
+
 def ex_autopilot(d: Daemon) -> list:
     """LOITER's station keeping (pushed out and back) and the pre-arm distance check."""
     ap = d.autopilot
@@ -290,6 +300,7 @@ EXERCISES = {
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
+    "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
 

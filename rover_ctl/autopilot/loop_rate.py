@@ -1,0 +1,76 @@
+"""The control loop's rate in vehicle time, and what a slow loop means for driving.
+
+The daemon steps once per ``1 / SCHED_LOOP_RATE`` of vehicle time when it keeps up. Against a
+simulator running many times faster than real time (or on a machine too slow for the loop), the
+steps come further apart in vehicle time: the rover then moves further between two decisions.
+``LoopRate`` measures the rate over a sliding window of vehicle time (the inverse of the median
+step interval, so one gap in the vehicle's data does not count as a slow loop; the vehicle-link
+failsafe owns gaps) and, while it is low:
+
+- says so once (STATUSTEXT warning, and again when the rate recovers), and
+- limits the speed so that the rover moves at most ``daemon.max_step_travel_m`` between two
+  control steps: ``speed_limit_mps = max_step_travel_m * rate_hz``. At the nominal 25 Hz and the
+  default 0.1 m that is 2.5 m/s, above any cruise speed, so a loop that keeps up is never limited.
+
+Hysteresis: slow below ``slow_loop_fraction`` of the target rate, recovered above the midpoint
+between that and the target, so a rate on the edge does not flap.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+from rover_ctl.config import DaemonParams
+
+
+@dataclass(frozen=True)
+class LoopRateState:
+    rate_hz: float | None
+    """Steps per second of vehicle time (1 / median step interval over the last window); None
+    until a window is full."""
+    slow: bool
+    speed_limit_mps: float | None
+    """The travel-per-step speed limit while slow, else None."""
+    changed: bool
+    """The slow flag changed at this step (say so)."""
+
+    def text(self, target_hz: float, max_step_travel_m: float) -> str:
+        """What to tell the ground station when ``changed``. The limit follows the rate while the
+        loop stays slow, so the text names the rule, not one figure that would go stale."""
+        if self.slow:
+            return (f"Control loop slow: {self.rate_hz:.1f} Hz of {target_hz:g} Hz, "
+                    f"speed limited to {max_step_travel_m:g} m per step")  # fmt: skip
+        return f"Control loop back to {self.rate_hz:.1f} Hz of {target_hz:g} Hz"
+
+
+class LoopRate:
+    """Control steps per second of vehicle time over ``daemon.loop_rate_window_s`` (parameters read live)."""
+
+    def __init__(self, params: DaemonParams) -> None:
+        self.params = params
+        self._times: deque[float] = deque()
+        self.slow = False
+
+    def step(self, t_s: float) -> LoopRateState:
+        """Record a control step at vehicle time ``t_s``."""
+        p = self.params
+        if self._times and t_s < self._times[-1]:
+            self._times.clear()  # the vehicle's clock restarted: measure afresh
+        self._times.append(t_s)
+        while len(self._times) > 2 and t_s - self._times[1] >= p.loop_rate_window_s:
+            self._times.popleft()
+        rate_hz = None
+        if t_s - self._times[0] >= p.loop_rate_window_s:
+            intervals = sorted(b - a for a, b in zip(self._times, list(self._times)[1:]))
+            median_s = intervals[len(intervals) // 2]
+            rate_hz = 1.0 / median_s if median_s > 0 else None
+        was = self.slow
+        if rate_hz is not None:
+            slow_hz = p.slow_loop_fraction * p.control_rate_hz
+            if rate_hz < slow_hz:
+                self.slow = True
+            elif rate_hz >= (slow_hz + p.control_rate_hz) / 2.0:
+                self.slow = False
+        limit = p.max_step_travel_m * rate_hz if self.slow and rate_hz is not None else None
+        return LoopRateState(rate_hz, self.slow, limit, self.slow != was)

@@ -1,0 +1,83 @@
+"""The control loop's rate in vehicle time: a loop that falls behind a fast vehicle says so and
+limits the speed to a bounded travel per step; one that keeps up is never limited."""
+
+from __future__ import annotations
+
+import math
+
+from autopilot.harness import Bench, mission
+
+from rover_ctl.autopilot.loop_rate import LoopRate
+from rover_ctl.config import DaemonParams
+from rover_ctl.vocabulary import RoverMode, Severity
+
+
+def feed(monitor: LoopRate, start_s: float, rate_hz: float, seconds: float):
+    states, t_s = [], start_s
+    while t_s < start_s + seconds:
+        states.append(monitor.step(t_s))
+        t_s += 1.0 / rate_hz
+    return states, t_s
+
+
+def test_a_loop_that_keeps_up_is_never_slow_or_limited():
+    states, _ = feed(LoopRate(DaemonParams()), 0.0, 25.0, 20.0)
+    assert states[0].rate_hz is None  # no figure before a whole window
+    rates = [s.rate_hz for s in states if s.rate_hz is not None]
+    assert rates and all(abs(r - 25.0) < 0.01 for r in rates)
+    assert not any(s.slow or s.changed or s.speed_limit_mps is not None for s in states)
+
+
+def test_a_slow_loop_is_reported_once_limited_and_recovers():
+    params = DaemonParams()
+    monitor = LoopRate(params)
+    _, t_s = feed(monitor, 0.0, 25.0, 5.0)
+    slow, t_s = feed(monitor, t_s, 6.8, 10.0)
+    back, _ = feed(monitor, t_s, 25.0, 10.0)
+    assert [s.changed for s in slow].count(True) == 1 and slow[-1].slow
+    assert math.isclose(slow[-1].speed_limit_mps, params.max_step_travel_m * 6.8, rel_tol=1e-6)
+    assert next(s for s in slow if s.changed).text(25.0, 0.1) == "Control loop slow: 6.8 Hz of 25 Hz, speed limited to 0.1 m per step"
+    assert [s.changed for s in back].count(True) == 1 and not back[-1].slow and back[-1].speed_limit_mps is None
+    assert next(s for s in back if s.changed).text(25.0, 0.1) == "Control loop back to 25.0 Hz of 25 Hz"
+
+
+def test_hysteresis_between_the_slow_threshold_and_the_target():
+    monitor = LoopRate(DaemonParams())  # slow below 20 Hz, recovered from 22.5 Hz
+    _, t_s = feed(monitor, 0.0, 15.0, 5.0)
+    assert monitor.slow
+    states, _ = feed(monitor, t_s, 21.0, 10.0)  # between the two: stays slow, no flapping
+    assert monitor.slow and not any(s.changed for s in states)
+
+
+def test_one_gap_in_the_vehicle_data_is_not_a_slow_loop():
+    monitor = LoopRate(DaemonParams())
+    _, t_s = feed(monitor, 0.0, 25.0, 3.0)
+    states, t_s = feed(monitor, t_s + 1.0, 25.0, 3.0)  # a 1 s hole (the link failsafe's business)
+    assert not any(s.slow for s in states)
+
+
+def test_a_restarted_vehicle_clock_starts_a_new_measurement():
+    monitor = LoopRate(DaemonParams())
+    feed(monitor, 100.0, 25.0, 3.0)
+    assert monitor.step(0.5).rate_hz is None
+
+
+def test_the_autopilot_warns_and_drives_slower_when_its_loop_falls_behind():
+    bench = Bench(step_period_s=1.0 / 5.0)  # 5 steps per second of vehicle time instead of 25
+    bench.ready(mission((0.0, 60.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    bench.run(15.0)
+    warnings = [e for e in bench.events if getattr(e, "text", "").startswith("Control loop slow")]
+    assert len(warnings) == 1 and warnings[0].severity == Severity.WARNING, bench.texts
+    limit_mps = DaemonParams().max_step_travel_m * 5.0
+    assert bench.outputs[-1].log_row["speed_limit_mps"] <= limit_mps + 1e-9
+    assert 0.1 < bench.speed_mps <= limit_mps * 1.1  # still driving, at the bounded speed
+
+
+def test_the_autopilot_at_full_rate_drives_at_cruise():
+    bench = Bench()
+    bench.ready(mission((0.0, 60.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    bench.run(15.0)
+    assert not [t for t in bench.texts if t.startswith("Control loop")]
+    assert bench.speed_mps > 0.9
