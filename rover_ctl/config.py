@@ -81,6 +81,26 @@ class LinkParams:
     otherwise the list, e.g. ``[0, 2, 4, 6]`` (docs/ardupilot.md, "Rangefinders")."""
     rangefinder_discovery_s: float = 3.0
     """Vehicle seconds after the first sensor message during which reporting rangefinders are counted."""
+    line_bytes_per_s: float = 0.0
+    """The vehicle link's capacity one way, bytes per second. 0 (default): a serial device's baud
+    rate / 10 (``/dev/ttyUSB0,57600``: 5760), ``network_bytes_per_s`` for UDP and TCP
+    (``rover_ctl.mavlink.budget``)."""
+    network_bytes_per_s: float = 100_000.0
+    """The capacity assumed for a UDP or TCP vehicle link (generous: a radio bridged to the network
+    must set ``line_bytes_per_s`` instead)."""
+    line_use_max: float = 0.7
+    """Share of the line the requested message rates may fill; the rest is for what the vehicle
+    sends unasked (heartbeats, acknowledgements, STATUSTEXT) and for bursts."""
+    rate_window_s: float = 2.0
+    """Vehicle time over which the link measures each message's rate (link health, sensor-rate failsafe)."""
+    health_period_s: float = 10.0
+    """Wall seconds between two link-health lines in the daemon's log and event log."""
+    radio_txbuf_low_pct: float = 50.0
+    """RADIO_STATUS.txbuf (free space of the local radio's transmit buffer, percent) below which
+    the daemon sends RC overrides less often, as ArduPilot slows its streams."""
+    override_min_hz: float = 4.0
+    """The slowest the daemon refreshes RC overrides when its radio's buffer is full (well inside
+    ArduPilot's RC_OVERRIDE_TIME, 3 s by default)."""
 
 
 @dataclass
@@ -146,6 +166,14 @@ class FailsafeParams:
     silent its side counts as blocked and the rover goes on at ``degraded_speed_mps``."""
     degraded_speed_mps: float = 0.5
     """Speed limit while a rangefinder the rule base reads, but not a required one, is silent."""
+    range_travel_m: float = 0.15
+    """The rover moves at most this far between two readings of a rangefinder the navigator reads:
+    the speed is limited to this times the slowest such rangefinder's measured rate (3 m/s at
+    20 Hz, 1.2 m/s at 8 Hz), so that a slow line does not let it outrun its avoidance."""
+    min_sensor_rate_hz: float = 4.0
+    """ATTITUDE or WHEEL_DISTANCE arriving slower than this (measured on the vehicle link over
+    ``link.rate_window_s``) holds the rover: the estimator cannot follow it. The link budget
+    never plans below it."""
     gps_timeout_s: float = 1.0
     """No GPS fix for longer than this: dead reckoning."""
     dead_reckoning_max_s: float = 20.0
@@ -355,7 +383,16 @@ class DaemonParams:
     gps_rate_hz: float = 5.0
     """Rate asked of the vehicle for GPS_RAW_INT."""
     rangefinder_rate_hz: float = 20.0
-    """Rate asked of the vehicle for DISTANCE_SENSOR."""
+    """Rate asked of the vehicle for DISTANCE_SENSOR (each rangefinder)."""
+    min_gps_rate_hz: float = 1.0
+    """The link budget never plans GPS_RAW_INT below this."""
+    min_rangefinder_rate_hz: float = 4.0
+    """The link budget never plans DISTANCE_SENSOR below this (each rangefinder)."""
+    core_rate_hz: float = 10.0
+    """On a line too slow for everything, odometry and then the rangefinders are raised to this
+    first, before odometry gets the full control rate (``rover_ctl.mavlink.budget``)."""
+    status_rate_hz: float = 1.0
+    """Rate asked for SYS_STATUS (the battery, forwarded to the ground station)."""
     truth_rate_hz: float = 10.0
     """SIMSTATE (emulator ground truth, logged for evaluation; a real vehicle ignores the request)."""
     stream_rerequest_s: float = 3.0

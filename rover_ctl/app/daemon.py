@@ -42,6 +42,8 @@ from rover_ctl.estimation.estimator import PoseEstimator
 from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
 from rover_ctl.fuzzy import load_rulebase
+from rover_ctl.mavlink import budget
+from rover_ctl.mavlink.budget import StreamPlan
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
 from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
 from rover_ctl.mavlink.signing import KeyStore
@@ -119,6 +121,12 @@ class Daemon:
         self.tlogs: list[TlogWriter] = []
         self._saved_seq: int | None = None
         self.log_clock = LogClock(lambda: self.link.vehicle_time_s if self.lockstep else None)
+        self.stream_plan: StreamPlan | None = None
+        self._planned_rangefinders: int | None = None
+        self._rates_from_s = math.inf
+        """Vehicle time from which the measured odometry rates reflect the plan (one window after asking)."""
+        self._next_health_wall_s = 0.0
+        self._next_override_wall_s = 0.0
 
     @property
     def period_s(self) -> float:
@@ -170,14 +178,64 @@ class Daemon:
         log.info("GCS link %s ready", cfg.link.gcs_url)
         return True
 
+    def _rangefinder_count(self) -> int:
+        """DISTANCE_SENSOR per period the vehicle will send: the reporting ones once the autopilot
+        has its rangefinder plan, else the configured list, else what the rule base reads."""
+        if self.autopilot.rangefinder_plan is not None:
+            return len(self.ranges)
+        configured = self.config.link.rangefinders
+        return len(configured) if configured != [-1] else len(self.autopilot.navigator.orientations)
+
     def _request_streams(self) -> None:
-        p = self.settings
-        self.link.request_streams(
-            {"ATTITUDE": p.sensor_rate_hz, "GPS_RAW_INT": p.gps_rate_hz, "DISTANCE_SENSOR": p.rangefinder_rate_hz,
-             "SIMSTATE": p.truth_rate_hz},
-            extra1_hz=p.sensor_rate_hz,
-        )  # fmt: skip
+        """Ask the vehicle for the link budget's rates (``rover_ctl.mavlink.budget``); say what
+        they are, and loudly when even the minimum rates do not fit the line."""
+        link = self.link
+        count = self._rangefinder_count()
+        sizes = {n: size for n in ("WHEEL_DISTANCE", "ATTITUDE", "GPS_RAW_INT", "DISTANCE_SENSOR", "SYS_STATUS", "HEARTBEAT")
+                 if (size := link.health.mean_size(n)) is not None}  # fmt: skip
+        plan = budget.plan(self.settings, self.config.link, self.config.failsafe, link.url, count, measured_bytes=sizes)
+        link.request_streams(plan)
         self._streams_requested_wall_s = time.monotonic()
+        self._rates_from_s = link.vehicle_time_s + self.config.link.rate_window_s
+        self._planned_rangefinders = count
+        if plan != self.stream_plan:
+            log.info("vehicle link budget: %s", plan.describe())
+            self.events.write(link.vehicle_time_s, "link_plan", rates_hz=plan.rates_hz, bytes_per_s=round(plan.bytes_per_s),
+                              line_bytes_per_s=plan.line_bytes_per_s, source=plan.source)  # fmt: skip
+            if plan.shortfall:
+                text = f"Link too slow: {plan.shortfall}"
+                log.error("%s", text)
+                self.events.write(link.vehicle_time_s, "statustext", text=text, severity=int(Severity.CRITICAL))
+                if self.gcs is not None:
+                    self.gcs.send_statustext(text, mav.MAV_SEVERITY_CRITICAL)
+        self.stream_plan = plan
+
+    def _sensor_rates(self) -> dict[str, float]:
+        """Measured odometry rates for the failsafe, once the plan's rates can have arrived."""
+        link = self.link
+        now = link.vehicle_time_s
+        if now < self._rates_from_s:
+            return {}
+        return {n: hz for n in ("ATTITUDE", "WHEEL_DISTANCE") if (hz := link.health.rate_hz(n, now)) is not None}
+
+    def _report_link(self) -> None:
+        """Every ``link.health_period_s``: what the vehicle link carried, in the log and the event log."""
+        now = time.monotonic()
+        if now < self._next_health_wall_s:
+            return
+        self._next_health_wall_s = now + self.config.link.health_period_s
+        link = self.link
+        stats = link.health.stats(link.vehicle_time_s)
+        radio = link.radio
+        line = stats.describe(("WHEEL_DISTANCE", "ATTITUDE", "GPS_RAW_INT", "DISTANCE_SENSOR"))
+        if radio is not None:
+            line += f"; radio rssi {radio.rssi}/{radio.remote_rssi}, txbuf {radio.txbuf_pct}%, rx errors {radio.rx_errors}"
+        log.info("vehicle link: %s", line)
+        record = {"rates_hz": {k: round(v, 2) for k, v in stats.rates_hz.items()}, "rx_bytes_per_s": round(stats.rx_bytes_per_s),
+                  "lost": stats.lost, "crc_errors": stats.crc_errors, "garbage": stats.garbage, "loss_pct": round(stats.loss_pct, 3)}  # fmt: skip
+        if radio is not None:
+            record |= {"rssi": radio.rssi, "remote_rssi": radio.remote_rssi, "txbuf_pct": radio.txbuf_pct}
+        self.events.write(link.vehicle_time_s, "link", **record)
 
     def run(self) -> int:
         """Open, loop until stopped, close. Returns a process exit code."""
@@ -232,6 +290,9 @@ class Daemon:
         elif not self.lockstep and items:
             self._maybe_step(link.vehicle_time_s)
         self._check_silence()
+        if self.autopilot.rangefinder_plan is not None and self._rangefinder_count() != self._planned_rangefinders:
+            self._request_streams()  # the rover's rangefinders are known now: budget them
+        self._report_link()
         self.gcs.poll(time.monotonic())
         self._note_gcs_heartbeat()
         self._send_telemetry()
@@ -377,7 +438,18 @@ class Daemon:
                 self._released = True
             return
         self._released = False
+        if self._radio_full():
+            now = time.monotonic()
+            if now < self._next_override_wall_s:
+                return  # the radio's buffer is filling: refresh at override_min_hz only
+            self._next_override_wall_s = now + 1.0 / self.config.link.override_min_hz
         self.link.send_override(out.command.steering_us, out.command.throttle_us)
+
+    def _radio_full(self) -> bool:
+        """The local telemetry radio reports its transmit buffer nearly full (RADIO_STATUS.txbuf),
+        the signal ArduPilot's own stream code backs off on."""
+        radio = self.link.radio
+        return radio is not None and radio.txbuf_pct < self.config.link.radio_txbuf_low_pct
 
     # ---- the control step ------------------------------------------------------------------------
 
@@ -416,6 +488,7 @@ class Daemon:
             vehicle_age_s=vehicle_age_s,
             gcs_age_s=math.inf if gcs_s is None else max(0.0, t_s - gcs_s),
             gps_age_s=math.inf if self.last_fix_s is None else max(0.0, t_s - self.last_fix_s),
+            sensor_rates_hz=self._sensor_rates(),
         )
 
     def _check_silence(self) -> None:
@@ -447,7 +520,11 @@ class Daemon:
             present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.autopilot.mission.fence else 0)
             reasons = self.autopilot.state().failsafes
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)
-            self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed)
+            stats = self.link.health
+            sent = stats.frames + stats.lost
+            drop_cpct = round(10_000 * stats.lost / sent) if sent else 0
+            self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed,
+                                     drop_rate_cpct=drop_cpct, errors_comm=stats.crc_errors)  # fmt: skip
         if self.estimator is None or not self.estimator.initialised or not self.gcs.pose_due(now):
             return
         pose = self.estimator.pose()

@@ -98,6 +98,8 @@ class Readings:
     """Since the last ground-station HEARTBEAT (inf: none yet)."""
     gps_age_s: float = math.inf
     """Since the last GPS fix (fix_type >= 2; inf: none yet)."""
+    sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
+    """Measured on the vehicle link: ATTITUDE and WHEEL_DISTANCE, each once it has arrived."""
 
 
 @dataclass(frozen=True)
@@ -412,6 +414,7 @@ class Autopilot:
             driving=self.armed and self.mode in modes.DRIVING_MODES,
             commanded_speed_mps=commanded,
             position_en=position,
+            sensor_rates_hz=readings.sensor_rates_hz,
         )
         decision = self.failsafes.update(self._clock_s, inputs)
         previous = self.decision.reasons if self.decision else ()
@@ -501,7 +504,7 @@ class Autopilot:
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()})
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
-        if decision.speed_limit_mps is not None:  # degraded sensing: a side is blind
+        if decision.speed_limit_mps is not None:  # a blind side, or rangefinders slower than the speed needs
             speed_mps = min(speed_mps, decision.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
         if self._loop is not None and self._loop.speed_limit_mps is not None:  # slow loop: bounded travel per step

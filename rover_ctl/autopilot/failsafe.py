@@ -25,12 +25,17 @@ API:
     FailsafeDecision.action: Action, .reasons (active failsafe names), .events (new this step),
         .blocked_orientations (silent rangefinders: the navigator treats those sides as blocked),
         .dead_reckoning, .replan (once, when a back-off ends: re-plan from here), .speed_limit_mps
-        (degraded sensing: a silent rangefinder that is not required)
+        (degraded sensing: a silent rangefinder that is not required; and always at most
+        ``range_travel_m`` per interval between two readings of the slowest used rangefinder)
 
 Rangefinders: those the navigator reads (``used_rangefinders``, the rangefinder plan's, set by the
 autopilot) and those ``params.required_rangefinders`` names (``[-1]``: the used ones) are watched.
 A silent required one is HOLD; a silent used one that is not required blocks its side and limits
 the speed to ``degraded_speed_mps``; others are not watched.
+
+Rates: odometry messages measured on the link below ``min_sensor_rate_hz`` hold the rover (a line
+that cannot carry what the estimator needs); rangefinders that report slowly limit the speed to
+``range_travel_m`` per reading interval.
 """
 
 from __future__ import annotations
@@ -59,6 +64,9 @@ class Action(enum.IntEnum):
     """Motors neutral and hold: no point commanding a vehicle that does not answer."""
 
 
+RANGE_INTERVAL_GAIN = 0.2
+"""Smoothing of the measured interval between rangefinder readings (first-order, per reading)."""
+
 GCS_ACTIONS = {"continue": Action.NONE, "hold": Action.HOLD, "rtl": Action.RTL}
 FENCE_ACTIONS = {"hold": Action.HOLD, "rtl": Action.RTL}
 
@@ -80,6 +88,9 @@ class FailsafeInputs:
     commanded_speed_mps: float = 0.0
     position_en: EN | None = None
     """Estimated position, for the stuck test."""
+    sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
+    """Measured rate on the vehicle link of each odometry message that has arrived at all
+    (ATTITUDE, WHEEL_DISTANCE); one below ``min_sensor_rate_hz`` holds the rover."""
 
 
 @dataclass(frozen=True)
@@ -146,6 +157,9 @@ class Failsafes:
         self._dead_reckoning_over = _Latch()
         self._estimator = _Latch()
         self._fence = _Latch()
+        self._sensor_rate = _Latch()
+        self._range_seen_s: dict[int, float] = {}
+        self._range_interval_s: dict[int, float] = {}
         self._ranges: dict[int, _Latch] = {}
         self._stuck = _Stuck.WATCHING
         self._tries = 0
@@ -178,6 +192,9 @@ class Failsafes:
         check(self._estimator, "estimator", not inputs.estimator_healthy, Action.HOLD, "unhealthy, hold", p.estimator_unhealthy_s)
         fence_action = FENCE_ACTIONS[p.fence_action]
         check(self._fence, "fence breach", not inputs.inside_fence, fence_action, p.fence_action)
+        slow = sorted((hz, name) for name, hz in inputs.sensor_rates_hz.items() if hz < p.min_sensor_rate_hz)
+        what = f"{slow[0][1]} {slow[0][0]:.1f} Hz, hold" if slow else ""
+        check(self._sensor_rate, "sensor rate", bool(slow), Action.HOLD, what)
 
         required = self.required_rangefinders()
         watched = self.used_rangefinders | required
@@ -194,13 +211,36 @@ class Failsafes:
                 check(rf, f"rangefinder {orientation}", silent, Action.NONE, "silent, side blocked")
         blocked = frozenset(o for o, rf in self._ranges.items() if rf.active)
         degraded = any(rf.active and o not in required for o, rf in self._ranges.items())
+        limit = p.degraded_speed_mps if degraded else None
+        interval_s = self._range_intervals(now_s, inputs.range_ages_s, blocked)
+        if interval_s is not None:
+            limit = min(limit if limit is not None else math.inf, p.range_travel_m / interval_s)
 
         replan = self._stuck_step(now_s, inputs, events, actions)
 
         action = max(actions.values(), default=Action.NONE)
         reasons = tuple(actions)
-        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan, self._tries,
-                                p.degraded_speed_mps if degraded else None)  # fmt: skip
+        return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan, self._tries, limit)
+
+    def _range_intervals(self, now_s: float, ages_s: Mapping[int, float], blocked: frozenset[int]) -> float | None:
+        """The longest smoothed interval between two readings of a used, reporting rangefinder.
+        A reading is new when its time (now - age) moved on; the interval is smoothed over a few
+        readings so one late message does not brake the rover; a gap longer than
+        ``rangefinder_timeout_s`` is a silence, the failsafe's business, and is not counted."""
+        for orientation in self.used_rangefinders:
+            age_s = ages_s.get(orientation)
+            if age_s is None or not math.isfinite(age_s):
+                continue
+            seen_s = now_s - age_s
+            last_s = self._range_seen_s.get(orientation)
+            # A gap longer than the timeout is a silence (the failsafe above), not a rate.
+            if last_s is not None and last_s + 1e-9 < seen_s <= last_s + self.params.rangefinder_timeout_s:
+                gap_s = seen_s - last_s
+                previous = self._range_interval_s.get(orientation, gap_s)
+                self._range_interval_s[orientation] = previous + RANGE_INTERVAL_GAIN * (gap_s - previous)
+            self._range_seen_s[orientation] = seen_s
+        intervals = [s for o, s in self._range_interval_s.items() if o in self.used_rangefinders and o not in blocked]
+        return max(intervals) if intervals else None
 
     def required_rangefinders(self) -> frozenset[int]:
         """Orientations whose silence holds the rover (``params.required_rangefinders``; [-1]: the used ones)."""

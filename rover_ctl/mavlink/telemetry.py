@@ -136,17 +136,18 @@ class Telemetry:
         return True
 
     def send_sys_status(self, now_s: float, voltage_v: float, remaining_pct: int, present: int = 0,
-                        enabled: int | None = None, failed: int = 0) -> bool:
+                        enabled: int | None = None, failed: int = 0, drop_rate_cpct: int = 0, errors_comm: int = 0) -> bool:
         """SYS_STATUS with the battery (``remaining_pct`` -1 when unknown) and MAV_SYS_STATUS_*
         sensor bits. As ArduPilot reports them, a bit is healthy unless it is in ``failed``, and
         the GEOFENCE bit is healthy whenever the fence is not breached: ground stations (MAVProxy)
-        announce a breach when that health bit is clear."""
+        announce a breach when that health bit is clear. ``drop_rate_cpct`` (c%) and
+        ``errors_comm``: the vehicle link's lost frames and bad-CRC frames, the daemon's link health."""
         if not self.rates.due(mav.MAVLINK_MSG_ID_SYS_STATUS, now_s):
             return False
         health = (present | mav.MAV_SYS_STATUS_GEOFENCE) & ~failed & 0xFFFFFFFF
         self.conn.mav.sys_status_send(
             present, present if enabled is None else enabled, health, 0, round(voltage_v * 1000), -1, remaining_pct,
-            0, 0, 0, 0, 0, 0,
+            min(drop_rate_cpct, 10_000), min(errors_comm, 65535), 0, 0, 0, 0,
         )  # fmt: skip
         return True
 

@@ -6,8 +6,10 @@ It owns one pymavlink connection (serial, udp or tcp connection string) and does
   accepts RC overrides from, ArduPilot's MAV_GCS_SYSID, formerly SYSID_MYGCS, 255 by default),
   find the vehicle's heartbeat and ask for its AUTOPILOT_VERSION (which tells rover-sitl in
   lockstep from anything else, see "Time sync" below);
-* ask for the message rates the daemon needs: SET_MESSAGE_INTERVAL per message, and
-  REQUEST_DATA_STREAM(EXTRA1) because ArduPilot only sends WHEEL_DISTANCE in that stream;
+* ask for the message rates of the daemon's link budget and nothing else
+  (``rover_ctl.mavlink.budget``: every stream off, EXTRA1 for WHEEL_DISTANCE, which ArduPilot
+  only sends in that stream, SET_MESSAGE_INTERVAL per other message), and measure what arrives
+  (``rover_ctl.mavlink.link_health``: rates, bytes, sequence gaps, bad CRCs);
 * decode what arrives into typed items (``rover_ctl.estimation.readings`` for sensors, the small classes
   below for the rest); frames that fail to parse are counted and dropped. Input is read in whole
   buffers (one system call for everything waiting) and parsed with pymavlink's parser: its
@@ -45,6 +47,8 @@ from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
+from rover_ctl.mavlink import budget  # noqa: E402
+from rover_ctl.mavlink.link_health import LinkHealth  # noqa: E402
 
 mavlink = mavutil.mavlink
 
@@ -61,6 +65,10 @@ LOCKSTEP_ANNOUNCEMENT = b"lockstep"
 markers (rover-sitl --lockstep; ArduPilot puts the first 8 bytes of its git hash there)."""
 READ_SIZE_BYTES = 65536
 """Largest read from the connection at once (a UDP datagram is at most this)."""
+WRONG_BAUD_BYTES = 4096
+"""Bytes received without a single MAVLink frame after which a serial line is called wrong (at
+57600 a vehicle sends that in well under two seconds)."""
+PYMAVLINK_DEFAULT_BAUD = 115200
 
 
 class LinkError(RuntimeError):
@@ -111,6 +119,18 @@ class StatusText:
     time_s: float
     severity: int
     text: str
+
+
+@dataclass(frozen=True)
+class RadioStatus:
+    """RADIO_STATUS from a SiK telemetry radio: signal levels and the local radio's buffer."""
+
+    rssi: int
+    remote_rssi: int
+    txbuf_pct: int
+    """Free space in the local radio's transmit buffer, percent."""
+    rx_errors: int
+    fixed: int
 
 
 @dataclass(frozen=True)
@@ -240,6 +260,11 @@ class VehicleLink:
         """The latest GPS_RAW_INT as received, forwarded to ground stations unchanged."""
         self.frames_received = 0
         self.garbage_frames = 0
+        self.rx_bytes = 0
+        self.health = LinkHealth(lambda: params.rate_window_s)
+        """Rates, bytes and losses of what the vehicle sends (``rover_ctl.mavlink.link_health``)."""
+        self.radio: RadioStatus | None = None
+        """The latest RADIO_STATUS of a telemetry radio on the line, if there is one."""
         self._next_heartbeat_s = 0.0
         self._pending: dict[int, _Pending] = {}
         self._held: list[Any] = []
@@ -329,14 +354,19 @@ class VehicleLink:
             return False
         self.link_error = None
         data = bytes(data) if not isinstance(data, bytes) else data
+        self.rx_bytes += len(data)
         if conn.first_byte:
             conn.auto_mavlink_version(data)
         chunk = data
         for _ in range(len(data) + 1):  # bounded: each round consumes bytes or ends
             try:
                 msg = conn.mav.parse_char(chunk)
-            except Exception:  # a frame pymavlink could not unpack
+            except Exception as exc:  # a frame pymavlink could not unpack: dropped, counted
                 self.garbage_frames += 1
+                if "CRC" in str(exc):
+                    self.health.bad_crc()
+                else:
+                    self.health.bad_bytes()
                 chunk = b""
                 continue
             chunk = b""
@@ -352,14 +382,23 @@ class VehicleLink:
 
     def _decode(self, msg: Any) -> Any:
         kind = msg.get_type()
-        if kind == "BAD_DATA":
+        if kind == "BAD_DATA":  # pymavlink's robust parsing hands back what it could not decode
             self.garbage_frames += 1
+            if "CRC" in str(getattr(msg, "reason", "")):
+                self.health.bad_crc()
+            else:
+                self.health.bad_bytes()
             return None
         if msg.get_srcSystem() == self.params.source_system:
             return None  # our own frames echoed by a broadcast medium
+        if kind == "RADIO_STATUS":  # the telemetry radio speaks with its own system id
+            self.radio = RadioStatus(msg.rssi, msg.remrssi, msg.txbuf, msg.rxerrors, msg.fixed)
+            return self.radio
         if self.vehicle is not None and msg.get_srcSystem() != self.target_system:
             return None  # another system on a shared link (a second GCS, a companion computer)
         self.frames_received += 1
+        self.health.frame(self.vehicle_time_s, kind, (msg.get_srcSystem(), msg.get_srcComponent()), msg.get_seq(),
+                          len(msg.get_msgbuf()))  # fmt: skip
         if kind == "TIMESYNC":
             if msg.tc1 != 0:
                 return None  # a response: we send no requests of our own
@@ -477,19 +516,24 @@ class VehicleLink:
         """TIMESYNC response: tc1 = our clock in ns (never 0, which would read as a request), ts1 echoed."""
         self.conn.mav.timesync_send(max(1, int(self._wall() * 1e9)), ts1_ns)
 
-    def request_streams(self, rates_hz: dict[str, float], extra1_hz: float) -> None:
-        """Ask for message rates (the vehicle sends what it can, we cope). EXTRA1 first: on
-        ArduPilot it sets ATTITUDE, SIMSTATE and WHEEL_DISTANCE together, then the per-message
-        intervals refine the others. Each interval is a separate command (ACKs keyed by
-        command id would replace each other), so they are sent without waiting for ACKs."""
-        self.conn.mav.request_data_stream_send(
-            self.target_system, self.target_component, mavlink.MAV_DATA_STREAM_EXTRA1, int(round(extra1_hz)), 1
-        )
-        for name, hz in rates_hz.items():
+    def request_streams(self, plan: budget.StreamPlan) -> None:
+        """Ask for the plan's rates and nothing else (``rover_ctl.mavlink.budget``): every stream
+        off, EXTRA1 (WHEEL_DISTANCE with ATTITUDE) at its rate with the EXTRA1 messages the daemon
+        does not read switched off, then one SET_MESSAGE_INTERVAL per other message (-1: off).
+        Each interval is a separate command (ACKs keyed by command id would replace each other),
+        so they are sent without waiting for ACKs; the vehicle sends what it can, we measure."""
+        t, c = self.target_system, self.target_component
+        self.conn.mav.request_data_stream_send(t, c, mavlink.MAV_DATA_STREAM_ALL, 0, 0)
+        rates = dict(plan.rates_hz)
+        extra1_hz = int(rates.pop(budget.EXTRA1, 0))
+        if extra1_hz > 0:
+            self.conn.mav.request_data_stream_send(t, c, mavlink.MAV_DATA_STREAM_EXTRA1, extra1_hz, 1)
+            rates |= {name: 0.0 for name in budget.EXTRA1_UNREAD if name not in rates}
+            rates["ATTITUDE"] = float(extra1_hz)
+        for name, hz in rates.items():
             msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
-            self.conn.mav.command_long_send(
-                self.target_system, self.target_component, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0
-            )
+            interval_us = 1e6 / hz if hz > 0 else -1.0
+            self.conn.mav.command_long_send(t, c, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, interval_us, 0, 0, 0, 0, 0)
 
     def param_set(self, name: str, value: float) -> None:
         self.conn.mav.param_set_send(
@@ -538,8 +582,13 @@ class VehicleLink:
         while self.vehicle is None:
             if cancelled():
                 return None
+            if self.rx_bytes >= WRONG_BAUD_BYTES and self.frames_received == 0 and budget.is_serial(self.url):
+                baud = budget.serial_baud(self.url) or PYMAVLINK_DEFAULT_BAUD
+                raise LinkError(f"vehicle link {self.url}: {self.rx_bytes} bytes but not one MAVLink frame at "
+                                f"{baud} baud: wrong baud rate? (write DEVICE,BAUD, e.g. /dev/ttyUSB0,57600)")  # fmt: skip
             if self._wall() > deadline:
-                raise LinkError(f"vehicle link {self.url}: no vehicle heartbeat within {timeout_s:g} s")
+                heard = f" ({self.rx_bytes} bytes, no MAVLink frame)" if self.rx_bytes and not self.frames_received else ""
+                raise LinkError(f"vehicle link {self.url}: no vehicle heartbeat within {timeout_s:g} s{heard}")
             self._pump(0.05)
         return self.vehicle
 

@@ -219,3 +219,75 @@ def test_no_vehicle_is_a_clear_error():
     with pytest.raises(LinkError, match="no vehicle heartbeat within 0.2 s"):
         link.wait_vehicle(0.2)
     link.close()
+
+
+def test_streams_are_asked_for_from_the_budget_and_nothing_else(pair):
+    """Every stream off, EXTRA1 (WHEEL_DISTANCE) at its whole-hertz rate with the EXTRA1 messages
+    the daemon does not read switched off, then one interval per other message."""
+    from rover_ctl.config import Config
+    from rover_ctl.mavlink import budget
+
+    link, vehicle, _ = pair
+    c = Config()
+    plan = budget.plan(c.daemon, c.link, c.failsafe, "/dev/ttyUSB0,57600", 6)
+    link.request_streams(plan)
+    stop, extra1 = receive(vehicle, "REQUEST_DATA_STREAM"), receive(vehicle, "REQUEST_DATA_STREAM")
+    assert (stop.req_stream_id, stop.start_stop) == (mav.MAV_DATA_STREAM_ALL, 0)
+    assert (extra1.req_stream_id, extra1.req_message_rate, extra1.start_stop) == (mav.MAV_DATA_STREAM_EXTRA1, plan.rates_hz["EXTRA1"], 1)
+    intervals = {}
+    while (msg := vehicle.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.5)) is not None:
+        assert msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL
+        intervals[mav.mavlink_map[int(msg.param1)].msgname] = msg.param2
+    assert intervals["GPS_RAW_INT"] == pytest.approx(1e6 / plan.rates_hz["GPS_RAW_INT"])
+    assert intervals["DISTANCE_SENSOR"] == pytest.approx(1e6 / plan.rates_hz["DISTANCE_SENSOR"])
+    assert intervals["ATTITUDE"] == pytest.approx(1e6 / plan.rates_hz["EXTRA1"])
+    assert all(intervals[name] == -1 for name in budget.EXTRA1_UNREAD)  # SIMSTATE included: no room on 57600
+    assert "WHEEL_DISTANCE" not in intervals  # ArduPilot refuses it: it comes with EXTRA1
+
+
+def test_link_health_counts_rates_bad_crcs_and_sequence_gaps(pair):
+    link, vehicle, _ = pair
+    for k in range(40):
+        if k == 20:
+            vehicle.mav.seq = (vehicle.mav.seq + 3) % 256  # three frames "lost" on the way
+        vehicle.mav.attitude_send(1000 + 50 * k, 0, 0, 0.0, 0, 0, 0.0)
+    good = vehicle.mav.attitude_encode(3000, 0, 0, 0.0, 0, 0, 0.0).pack(vehicle.mav)
+    vehicle.write(good[:-1] + bytes([good[-1] ^ 0xFF]))  # a byte error in the CRC
+    vehicle.mav.seq = (vehicle.mav.seq + 1) % 256  # the corrupted frame had its own sequence number
+    vehicle.mav.attitude_send(3050, 0, 0, 0.0, 0, 0, 0.0)
+    deadline = time.monotonic() + 2.0
+    while link.vehicle_time_s < 3.05 and time.monotonic() < deadline:
+        link.wait_readable(0.05)
+        link.poll()
+    stats = link.health.stats(link.vehicle_time_s)
+    assert stats.crc_errors == 1 and stats.lost == 3 + 1  # the dropped frame left a gap too
+    assert stats.rates_hz["ATTITUDE"] == pytest.approx(20.0, rel=0.1)
+
+
+def test_radio_status_from_the_radio_is_read_whatever_its_system_id(pair):
+    from rover_ctl.mavlink.vehicle import RadioStatus
+
+    link, _, _ = pair
+    port = link.conn.port.getsockname()[1]
+    radio = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=51, source_component=68, dialect="ardupilotmega")
+    radio.mav.radio_status_send(180, 170, 40, 20, 25, 3, 1)
+    status = drain(link, RadioStatus)
+    assert (status.rssi, status.remote_rssi, status.txbuf_pct, status.rx_errors) == (180, 170, 40, 3)
+    radio.close()
+
+
+def test_a_serial_line_at_the_wrong_baud_rate_is_a_clear_error():
+    """A radio at 57600 opened at 115200 delivers bytes that never make a frame: say so, early."""
+    import pty as ptymod
+
+    master, slave = ptymod.openpty()
+    device = os.ttyname(slave)
+    link = VehicleLink(f"{device},115200", LinkParams())
+    try:
+        os.write(master, bytes(range(256)) * 20)  # what a mismatched UART reads: noise
+        with pytest.raises(LinkError, match=r"not one MAVLink frame at 115200 baud: wrong baud rate"):
+            link.wait_vehicle(5.0)
+    finally:
+        link.close()
+        os.close(master)
+        os.close(slave)

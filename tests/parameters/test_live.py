@@ -100,6 +100,7 @@ def ex_failsafes(d: Daemon) -> list:
             driving=t >= 66.0,
             commanded_speed_mps=0.5 if t < 86.0 else 0.25,
             position_en=tuple(position),
+            sensor_rates_hz={"ATTITUDE": 2.5 if 70.0 <= t < 72.0 else 25.0, "WHEEL_DISTANCE": 25.0},
         )
         decision = fs.update(t, inputs)
         trace.append((decision.action, decision.reasons, [e.text for e in decision.events], decision.blocked_orientations,
@@ -259,6 +260,35 @@ def ex_loop_rate(d: Daemon) -> list:
     return trace
 
 
+def ex_link(d: Daemon) -> list:
+    """The daemon's vehicle-link housekeeping on a fake wall clock: overrides thinned while the
+    radio's buffer is low, the link-health report period, the measured-rate window."""
+    from rover_ctl.autopilot.autopilot import StepOutput
+    from rover_ctl.mavlink.link_health import LinkHealth
+    from rover_ctl.mavlink.vehicle import RadioStatus
+    from rover_ctl.navigation.wheel_control import WheelCommand
+
+    clock = [0.0]
+    sent: list = []
+    records: list = []
+    d.link = SimpleNamespace(radio=RadioStatus(180, 170, 40, 0, 0), vehicle_time_s=0.0, url="udpin:127.0.0.1:1",
+                             health=LinkHealth(lambda: d.config.link.rate_window_s),
+                             send_override=lambda steering, throttle: sent.append(round(clock[0], 3)))  # fmt: skip
+    d.events = SimpleNamespace(write=lambda t_s, kind, **fields: records.append((round(clock[0], 3), kind)))
+    real_time = daemon_module.time
+    daemon_module.time = SimpleNamespace(monotonic=lambda: clock[0], perf_counter=real_time.perf_counter)
+    try:
+        for k in range(400):
+            clock[0] = d.link.vehicle_time_s = k * 0.04
+            d.link.health.frame(clock[0], "ATTITUDE", (1, 1), k % 256, 40)
+            d._send_command(StepOutput(WheelCommand(1500, 1600, 0.1, 0.1), (), {}))
+            d._report_link()
+        rates = [d.link.health.rate_hz("ATTITUDE", t) for t in (16.0, 17.0, 18.0)]
+    finally:
+        daemon_module.time = real_time
+    return [sent, records, rates]
+
+
 def ex_autopilot(d: Daemon) -> list:
     """LOITER's station keeping (pushed out and back) and the pre-arm distance check."""
     ap = d.autopilot
@@ -300,6 +330,7 @@ EXERCISES = {
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
+    "link": (no_mission, ex_link, ("link.radio_txbuf_low_pct", "link.override_min_hz", "link.health_period_s", "link.rate_window_s")),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
