@@ -79,6 +79,21 @@ def extra_params(rangefinders: tuple[int, ...], wheel_encoders: bool = True) -> 
     return params
 
 
+def firmware_command(binary: Path, workdir: Path, home: tuple[float, float, float], params: dict[str, float],
+                     speedup: float, serial_ports: list[int], firmware_dir: Path = FIRMWARE_DIR) -> list[str]:
+    """The firmware's command line, to run in ``workdir``: the skid-steer model, the eeprom wiped,
+    ArduPilot's stock defaults plus ``params`` (written to ``workdir/extra.parm``), heading north
+    at ``home`` (lat, lon, alt), and SERIALn dialling ``udp 127.0.0.1:serial_ports[n]`` (loopback
+    only; the firmware never listens)."""
+    parm = workdir / "extra.parm"
+    parm.write_text("".join(f"{name} {value:g}\n" for name, value in params.items()))
+    defaults = ",".join([str(firmware_dir / name) for name in DEFAULT_PARAMS] + [str(parm)])
+    lat_deg, lon_deg, alt_m = home
+    serials = [arg for n, port in enumerate(serial_ports) for arg in (f"--serial{n}", f"udpclient:127.0.0.1:{port}")]
+    return [str(binary), "--model", "rover-skid", "--speedup", f"{speedup:g}", "-w",
+            f"--home={lat_deg},{lon_deg},{alt_m},0", "--defaults", defaults, *serials]  # fmt: skip
+
+
 @dataclass
 class FirmwareOptions(SimOptions):
     rangefinders: str = "six"
@@ -117,15 +132,10 @@ class FirmwareRun(SimRun):
         home = self.home
         if home is None:
             raise SimError("the firmware needs a mission with a home position")
-        parm = self.workdir / "extra.parm"
         params = extra_params(RANGEFINDER_LAYOUTS[o.rangefinders]) | o.params
-        parm.write_text("".join(f"{name} {value:g}\n" for name, value in params.items()))
-        defaults = ",".join([str(o.firmware_dir / name) for name in DEFAULT_PARAMS] + [str(parm)])
-        speedup = 1.0 if o.lockstep else o.speedup
-        return [str(self.binary), "--model", "rover-skid", "--speedup", f"{speedup:g}", "-w",
-                f"--home={home.lat_deg},{home.lon_deg},{home.alt_m},0", "--defaults", defaults,
-                "--serial0", f"udpclient:127.0.0.1:{self.vehicle_port}",
-                "--serial1", f"udpclient:127.0.0.1:{self.watch_port}"]  # fmt: skip
+        return firmware_command(self.binary, self.workdir, (home.lat_deg, home.lon_deg, home.alt_m), params,
+                                speedup=1.0 if o.lockstep else o.speedup,
+                                serial_ports=[self.vehicle_port, self.watch_port], firmware_dir=o.firmware_dir)  # fmt: skip
 
     def _daemon_command(self) -> list[str]:
         cmd = super()._daemon_command()
