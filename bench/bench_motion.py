@@ -3,7 +3,8 @@
 Both vehicles get the same RC_CHANNELS_OVERRIDE (ch1 steering, ch3 throttle, MANUAL, force-armed,
 empty field at CMAC heading north): straight lines, pivots and arcs, each held ``HOLD_S`` of
 vehicle time, then neutral until the rover stands still. The steady state is measured over the
-last ``WINDOW_S`` from ground truth (SIMSTATE: lat, lng, yaw; ``steady_state``):
+last ``WINDOW_S`` from ground truth (SIMSTATE: lat, lng, yaw; ``steady_state``), each vehicle's
+positions in its own ground frame (``wgs84_frame``, ``ardupilot_frame``):
 
 - rover-sitl in lockstep (``sitl.launch``, ``sitl.client.LockstepClient``), stamped with the frame time;
 - ArduPilot's firmware (``rover_ctl.app.firmware.firmware_command``: ``--model rover-skid``, stock
@@ -77,6 +78,11 @@ BOOT_WALL_S = 60.0
 AP_SKID_MAX_SPEED_MPS = 4.0
 AP_SKID_TURN_RATE_DPS = 140.0
 AP_MAX_YAW_RATE_DPS = 360.0
+AP_EARTH_RADIUS_M = 6378100.0
+"""ArduPilot's RADIUS_OF_EARTH: its SITL moves the vehicle in metres of a sphere of this radius
+(LOCATION_SCALING_FACTOR, longitude scaled by cos(latitude)), not on the WGS84 ellipsoid: at CMAC
+WGS84 metres are 0.33 % shorter north-south and 0.11 % longer east-west, so each vehicle is
+measured in its own frame."""
 
 
 @dataclass
@@ -85,6 +91,22 @@ class Motion:
     """Signed ground speed along the heading."""
     turn_rate_dps: float
     """Clockwise positive (compass)."""
+
+
+Frame = Callable[[float, float], Callable]
+"""(lat0_deg, lon0_deg) -> to_en(lat_deg, lon_deg) -> (east_m, north_m); arrays in, arrays out."""
+
+
+def wgs84_frame(lat0_deg: float, lon0_deg: float):
+    """rover-sitl's truth frame (sitl/geodesy.py)."""
+    return LocalFrame(lat0_deg, lon0_deg).to_en
+
+
+def ardupilot_frame(lat0_deg: float, lon0_deg: float):
+    """ArduPilot's flat-earth metres about (lat0, lon0)."""
+    metres_per_deg = math.radians(1.0) * AP_EARTH_RADIUS_M
+    east_per_deg = metres_per_deg * math.cos(math.radians(lat0_deg))
+    return lambda lat_deg, lon_deg: ((lon_deg - lon0_deg) * east_per_deg, (lat_deg - lat0_deg) * metres_per_deg)
 
 
 def _heading_integrals(t_s: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
@@ -97,7 +119,8 @@ def _heading_integrals(t_s: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
     return np.column_stack([scale * np.sin(mid), scale * np.cos(mid)])
 
 
-def steady_state(samples: list[tuple[float, float, float, float]], window_s: float = WINDOW_S) -> Motion:
+def steady_state(samples: list[tuple[float, float, float, float]], window_s: float = WINDOW_S,
+                 frame: Frame = wgs84_frame) -> Motion:
     """Speed and turn rate over the last ``window_s`` of truth samples (t_s, lat_deg, lon_deg,
     yaw_rad NED).
 
@@ -113,8 +136,7 @@ def steady_state(samples: list[tuple[float, float, float, float]], window_s: flo
     t = np.array([s[0] for s in window])
     yaw = np.unwrap(np.array([s[3] for s in window]))
     turn_rate_dps = math.degrees(np.polyfit(t - t[0], yaw, 1)[0])
-    frame = LocalFrame(window[0][1], window[0][2])
-    east, north = frame.to_en(np.array([s[1] for s in window]), np.array([s[2] for s in window]))
+    east, north = frame(window[0][1], window[0][2])(np.array([s[1] for s in window]), np.array([s[2] for s in window]))
     moved = np.column_stack([east, north])[1:]
     unit_path = np.cumsum(_heading_integrals(t, yaw), axis=0)
     norm = float(np.sum(unit_path * unit_path))
@@ -122,11 +144,11 @@ def steady_state(samples: list[tuple[float, float, float, float]], window_s: flo
     return Motion(speed_mps, turn_rate_dps)
 
 
-def is_steady(samples: list[tuple[float, float, float, float]], window_s: float = WINDOW_S) -> bool:
+def is_steady(samples: list[tuple[float, float, float, float]], window_s: float = WINDOW_S, frame: Frame = wgs84_frame) -> bool:
     """The two halves of the window agree (within STEADY_TOLERANCE or the floors)."""
     end = samples[-1][0]
-    first = steady_state([s for s in samples if s[0] <= end - window_s / 2.0], window_s / 2.0)
-    second = steady_state(samples, window_s / 2.0)
+    first = steady_state([s for s in samples if s[0] <= end - window_s / 2.0], window_s / 2.0, frame)
+    second = steady_state(samples, window_s / 2.0, frame)
     return (abs(first.speed_mps - second.speed_mps) <= max(SPEED_FLOOR_MPS, STEADY_TOLERANCE * abs(second.speed_mps))
             and abs(first.turn_rate_dps - second.turn_rate_dps) <= max(TURN_FLOOR_DPS, STEADY_TOLERANCE * abs(second.turn_rate_dps)))  # fmt: skip
 
@@ -176,6 +198,7 @@ class Emulator:
     """rover-sitl in lockstep; one ``step`` is one frame."""
 
     name = "rover-sitl"
+    frame = staticmethod(wgs84_frame)
 
     def __init__(self, client: LockstepClient) -> None:
         self.client = client
@@ -205,10 +228,12 @@ class Firmware:
     """ArduPilot's firmware free running at a speed-up; one ``step`` is one short wait for its messages."""
 
     name = "ArduPilot"
+    frame = staticmethod(ardupilot_frame)
 
-    def __init__(self, conn, proc: subprocess.Popen) -> None:
+    def __init__(self, conn, proc: subprocess.Popen, log_path: Path) -> None:
         self.conn = conn
         self.proc = proc
+        self.log_path = log_path
         self.truth = Truth()
         self.armed = False
         self._boot_ms: int | None = None
@@ -242,7 +267,8 @@ class Firmware:
                 self.armed = bool(msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
             msg = self.conn.recv_msg()
         if self.proc.poll() is not None:
-            raise RuntimeError(f"ardurover exited with status {self.proc.returncode}")
+            lines = self.log_path.read_text(errors="replace").strip().splitlines()
+            raise RuntimeError(f"ardurover exited with status {self.proc.returncode}: {lines[-1] if lines else 'no output'}")
         if time.monotonic() - self._last_progress > STALL_WALL_S:
             raise RuntimeError(f"ardurover: no ATTITUDE for {STALL_WALL_S:g} s of wall time")
 
@@ -281,7 +307,7 @@ def _settle(vehicle) -> bool:
     while vehicle.truth.t_s < start + SETTLE_MAX_S:
         vehicle.step(NEUTRAL_US, NEUTRAL_US)
         recent = vehicle.truth.since(start)
-        if vehicle.truth.t_s >= start + STILL_WINDOW_S and len(recent) >= 3 and is_still(steady_state(recent, STILL_WINDOW_S)):
+        if vehicle.truth.t_s >= start + STILL_WINDOW_S and len(recent) >= 3 and is_still(steady_state(recent, STILL_WINDOW_S, vehicle.frame)):
             return True
     return False
 
@@ -295,10 +321,10 @@ def drive(vehicle, commands=COMMANDS) -> list[dict]:
         while vehicle.truth.t_s < start + HOLD_S:
             vehicle.step(throttle_us, steering_us)
         held = vehicle.truth.since(start)
-        motion = steady_state(held)
+        motion = steady_state(held, WINDOW_S, vehicle.frame)
         results.append({"kind": kind, "throttle_us": throttle_us, "steering_us": steering_us,
                         "speed_mps": round(motion.speed_mps, 3), "turn_rate_dps": round(motion.turn_rate_dps, 1),
-                        "steady": is_steady(held), "started_still": settled,
+                        "steady": is_steady(held, WINDOW_S, vehicle.frame), "started_still": settled,
                         "servos_us": list(vehicle.truth.servos_us) if vehicle.truth.servos_us else None})  # fmt: skip
         settled = _settle(vehicle)
     return results
@@ -329,7 +355,7 @@ def run_firmware(commands=COMMANDS, speedup: float = FIRMWARE_SPEEDUP) -> list[d
         proc = subprocess.Popen(firmware_command(binary, workdir, HOME, {}, speedup, [port]), cwd=workdir,
                                 stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)  # fmt: skip
         try:
-            firmware = Firmware(conn, proc)
+            firmware = Firmware(conn, proc, workdir / "ardurover.log")
             firmware.start()
             return drive(firmware, commands)
         finally:

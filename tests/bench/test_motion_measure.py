@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from bench.bench_motion import ardupilot_model, is_steady, relative_difference, steady_state
+from bench.bench_motion import AP_EARTH_RADIUS_M, ardupilot_frame, ardupilot_model, is_steady, relative_difference, steady_state
 from sitl.geodesy import LocalFrame
 
 HOME = (-35.363261, 149.165230)
@@ -65,3 +65,13 @@ def test_ardupilot_skid_model_and_differences():
     assert relative_difference(0.404, 1.0, 0.05) == pytest.approx(-0.596)
     assert relative_difference(0.01, 0.0, 0.05) == 0.0
     assert relative_difference(0.3, 0.0, 0.05) is None
+
+
+def test_ardupilot_positions_are_measured_in_ardupilot_metres():
+    """ArduPilot's SITL moves on a sphere (RADIUS_OF_EARTH): 1 m/s due north on it is 0.33 % less
+    in WGS84 metres at CMAC; its own frame measures it exactly."""
+    metres_per_deg = math.radians(1.0) * AP_EARTH_RADIUS_M
+    samples = [(k / RATE_HZ, HOME[0] + k / RATE_HZ / metres_per_deg, HOME[1], 0.0) for k in range(61)]
+    assert steady_state(samples, frame=ardupilot_frame).speed_mps == pytest.approx(1.0, rel=1e-6)
+    assert steady_state(samples).speed_mps == pytest.approx(1.0, abs=0.01)
+    assert steady_state(samples).speed_mps != pytest.approx(1.0, rel=1e-3)
