@@ -14,7 +14,7 @@ against this emulator sees the same outputs on a real vehicle:
    steering or throttle by MOT_STR_THR_MIX (0.5 = steering kept, throttle reduced to fit);
    left = t + s, right = t - s, negative outputs multiplied by the thrust asymmetry.
 3. Servo output (SERVO1 left, SERVO3 right, angle range 1000): ``trim + out * (max - trim)`` for
-   out >= 0, ``trim + out * (trim - min)`` below.
+   out >= 0, ``trim + out * (trim - min)`` below, the fraction of a microsecond dropped (toward trim).
 """
 
 from __future__ import annotations
@@ -112,10 +112,12 @@ def mix_scaled(steering: float, throttle: float, params: MixerParams = MixerPara
 
 
 def output_to_pwm(output: float, params: MixerParams = MixerParams()) -> int:
-    """Motor output -1..1 -> servo PWM (us), rounded to the nearest microsecond."""
+    """Motor output -1..1 -> servo PWM (us), truncated toward trim as ArduPilot's
+    ``SRV_Channel::pwm_from_angle`` does (``trim +- uint16_t(|out| * span)``): 0.3616 -> 1680, not 1681."""
     output = min(max(output, -1.0), 1.0)
     span = (params.servo_max_us - params.servo_trim_us) if output >= 0 else (params.servo_trim_us - params.servo_min_us)
-    return int(round(params.servo_trim_us + output * span))
+    offset = int(abs(output) * span)
+    return params.servo_trim_us + offset if output >= 0 else params.servo_trim_us - offset
 
 
 def mix_rc(steering_us: int, throttle_us: int, params: MixerParams = MixerParams()) -> tuple[int, int]:

@@ -58,6 +58,9 @@ RANGEFINDER_LAYOUTS = {
 """Rangefinder orientations (MAV_SENSOR_ORIENTATION) per named layout: the bundled six, the
 paper's four, a rover without a back one, none."""
 RANGEFINDER_MAX_M = 4.0
+SERIALS_DEFAULT_TCP = (1, 2)
+"""SITL serials that otherwise open TCP servers on every address (ports 5762, 5763, fixed: a second
+firmware process fails to bind them); ``firmware_command`` turns off those it is not given."""
 
 
 def firmware_path(directory: Path = FIRMWARE_DIR) -> Path | None:
@@ -77,6 +80,23 @@ def extra_params(rangefinders: tuple[int, ...], wheel_encoders: bool = True) -> 
         params |= {f"RNGFND{n}_TYPE": 100, f"RNGFND{n}_ORIENT": orientation, f"RNGFND{n}_MIN": 0.2,
                    f"RNGFND{n}_MAX": RANGEFINDER_MAX_M}  # fmt: skip
     return params
+
+
+def firmware_command(binary: Path, workdir: Path, home: tuple[float, float, float], params: dict[str, float],
+                     speedup: float, serial_ports: list[int], firmware_dir: Path = FIRMWARE_DIR) -> list[str]:
+    """The firmware's command line, to run in ``workdir``: the skid-steer model, the eeprom wiped,
+    ArduPilot's stock defaults plus ``params`` (written to ``workdir/extra.parm``), heading north
+    at ``home`` (lat, lon, alt), SERIALn dialling ``udp 127.0.0.1:serial_ports[n]`` and its other
+    TCP serials off (loopback only, no listening port: SITL's RC input socket on UDP 5501, bound
+    to every address in its source, is the one it cannot be told to drop)."""
+    parm = workdir / "extra.parm"
+    parm.write_text("".join(f"{name} {value:g}\n" for name, value in params.items()))
+    defaults = ",".join([str(firmware_dir / name) for name in DEFAULT_PARAMS] + [str(parm)])
+    lat_deg, lon_deg, alt_m = home
+    serials = [arg for n, port in enumerate(serial_ports) for arg in (f"--serial{n}", f"udpclient:127.0.0.1:{port}")]
+    serials += [arg for n in SERIALS_DEFAULT_TCP if n >= len(serial_ports) for arg in (f"--serial{n}", "none:")]
+    return [str(binary), "--model", "rover-skid", "--speedup", f"{speedup:g}", "-w",
+            f"--home={lat_deg},{lon_deg},{alt_m},0", "--defaults", defaults, *serials]  # fmt: skip
 
 
 @dataclass
@@ -117,15 +137,10 @@ class FirmwareRun(SimRun):
         home = self.home
         if home is None:
             raise SimError("the firmware needs a mission with a home position")
-        parm = self.workdir / "extra.parm"
         params = extra_params(RANGEFINDER_LAYOUTS[o.rangefinders]) | o.params
-        parm.write_text("".join(f"{name} {value:g}\n" for name, value in params.items()))
-        defaults = ",".join([str(o.firmware_dir / name) for name in DEFAULT_PARAMS] + [str(parm)])
-        speedup = 1.0 if o.lockstep else o.speedup
-        return [str(self.binary), "--model", "rover-skid", "--speedup", f"{speedup:g}", "-w",
-                f"--home={home.lat_deg},{home.lon_deg},{home.alt_m},0", "--defaults", defaults,
-                "--serial0", f"udpclient:127.0.0.1:{self.vehicle_port}",
-                "--serial1", f"udpclient:127.0.0.1:{self.watch_port}"]  # fmt: skip
+        return firmware_command(self.binary, self.workdir, (home.lat_deg, home.lon_deg, home.alt_m), params,
+                                speedup=1.0 if o.lockstep else o.speedup,
+                                serial_ports=[self.vehicle_port, self.watch_port], firmware_dir=o.firmware_dir)  # fmt: skip
 
     def _daemon_command(self) -> list[str]:
         cmd = super()._daemon_command()

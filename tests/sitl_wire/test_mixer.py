@@ -13,6 +13,7 @@ from sitl.mixer import MixerParams, RcChannel, mix_rc, mix_scaled
         (1500, 1800, (1785, 1785)),  # dead zone: 100*270//470 = 57 %
         (1800, 1700, (1967, 1393)),
         (2000, 1500, (2000, 1000)),  # pivot at neutral throttle
+        (1700, 1500, (1680, 1320)),  # 180.8 us truncated toward trim (python -m bench motion)
         (1000, 1500, (1000, 2000)),
         (1500, 1500, (1500, 1500)),
     ],
