@@ -45,7 +45,7 @@ from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.mavlink import budget
 from rover_ctl.mavlink.budget import StreamPlan
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
-from rover_ctl.mavlink.vehicle import Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.vehicle import PYMAVLINK_DEFAULT_BAUD, Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
 from rover_ctl.mavlink.signing import KeyStore
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
@@ -145,6 +145,10 @@ class Daemon:
             self.log_dir.mkdir(parents=True, exist_ok=True)
             self.events = EventLog(self.log_dir / "events.jsonl")
             self.csv = CsvLog(self.log_dir / "control.csv", CSV_COLUMNS)
+        url = cfg.link.vehicle_url
+        if budget.is_serial(url) and budget.serial_baud(url) is None:
+            log.warning("vehicle link %s: no baud rate given, opened at pymavlink's %d; a radio at another rate "
+                        "gives only garbage: write DEVICE,BAUD (e.g. /dev/ttyUSB0,57600)", url, PYMAVLINK_DEFAULT_BAUD)  # fmt: skip
         self.link = VehicleLink(
             cfg.link.vehicle_url,
             cfg.link,

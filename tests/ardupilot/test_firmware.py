@@ -9,7 +9,7 @@ rangefinders, no MAVn_OPTIONS), ``rover-ctl run`` on ``udpin`` and this test as 
 Each run is compared with the same mission in rover-sitl (lockstep, same daemon settings): every
 waypoint, duration within DURATION_RATIO of the emulator's, cross-track max within
 CROSS_TRACK_MAX_M of it. The firmware's skid-steer model and CRUISE/ATC tuning are not the
-emulator's (docs/sitl.md, "Emulator vs firmware"), hence the wide duration band.
+emulator's (docs/sitl.md, "Emulator vs ArduPilot's firmware"), hence the wide duration band.
 
 Speed-ups, chosen for CI time on 2 cores: 10x with six rangefinders (the firmware's ray casting
 caps it near 4x real time anyway), with the paper's four and with none; 50x without
