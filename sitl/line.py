@@ -81,12 +81,16 @@ class SerialLine:
         """Bytes that will leave intact before the next corrupted one."""
 
     # ---- what callers use ------------------------------------------------------------------
-    def offer(self, data: bytes, t_s: float) -> int:
-        """Offer ``data`` at time ``t_s``; returns how many bytes the buffer took (the rest are dropped)."""
+    def offer(self, data: bytes, t_s: float, whole: bool = False) -> int:
+        """Offer ``data`` at time ``t_s``; returns how many bytes the buffer took (the rest are
+        dropped). ``whole``: all of it or nothing, as a sender that checks the room first (ArduPilot
+        sends a MAVLink message only if its port has space for all of it)."""
         self._advance(t_s)
         if not self._queue:
             self._run_start_s, self._run_sent = self._now_s, 0  # idle line: the first byte starts now
         accepted = min(len(data), self.buffer_bytes - len(self._queue))
+        if whole and accepted < len(data):
+            accepted = 0
         self._queue += data[:accepted]
         self.stats.offered += len(data)
         self.stats.dropped_overflow += len(data) - accepted

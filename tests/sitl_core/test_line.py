@@ -42,6 +42,14 @@ def test_overflow_drops_the_tail_and_counts_it():
     assert conserved(line)
 
 
+def test_a_whole_offer_is_all_or_nothing():
+    line = SerialLine(BAUD, buffer_bytes=100)
+    assert line.offer(bytes(60), 0.0, whole=True) == 60
+    assert line.offer(bytes(60), 0.0, whole=True) == 0
+    assert line.offer(bytes(40), 0.0, whole=True) == 40
+    assert (line.stats.dropped_overflow, line.buffered) == (60, 100) and conserved(line)
+
+
 def test_byte_errors_change_bytes_at_the_drawn_rate_and_are_counted():
     line = SerialLine(BAUD, byte_error=0.01, buffer_bytes=1_000_000, seed=7)
     data = bytes(range(256)) * 400
