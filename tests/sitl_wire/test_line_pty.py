@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import sys
 import time
 
 import pytest
@@ -84,7 +85,7 @@ def test_bad_line_flags_give_one_line_error(capsys, flags: list[str], needle: st
 
 
 def test_an_unwritable_stats_file_is_refused_at_start(tmp_path) -> None:
-    result = subprocess.run([os.sys.executable, "-m", "sitl", "--pty", "--baud", "57600", "--line-stats",
+    result = subprocess.run([sys.executable, "-m", "sitl", "--pty", "--baud", "57600", "--line-stats",
                              str(tmp_path / "no" / "dir.json"), "--duration-s", "0"], capture_output=True, text=True, timeout=30)  # fmt: skip
     assert result.returncode == 2 and result.stderr.count("\n") == 1 and "--line-stats" in result.stderr, result
 

@@ -16,8 +16,8 @@ from sitl.line_relay import main
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402  (MAVLink 2 whatever mavutil was imported with)
 
-mav = mavutil.mavlink
 pytestmark = pytest.mark.sitl
 
 BAUD = 57600
@@ -26,8 +26,7 @@ DEADLINE_S = 20.0
 
 
 def packer(sysid: int = 1):
-    m = mav.MAVLink(None, srcSystem=sysid, srcComponent=1)
-    return m
+    return mav.MAVLink(None, srcSystem=sysid, srcComponent=1)
 
 
 def frames(n: int) -> list[bytes]:
@@ -96,7 +95,7 @@ def test_relays_both_ways_at_the_line_rate_and_counts(tmp_path) -> None:
 def test_the_line_takes_its_time_and_overflow_is_dropped(tmp_path) -> None:
     """10 KB at once into a 2 KB buffer: about 8 KB dropped, the rest spread over >= 2048/5760 s."""
     stats_path = tmp_path / "line.json"
-    burst = b"".join(frames(480))
+    burst = b"".join(frames(480))  # MAVLink 2: 21 to 24 bytes each
     assert len(burst) > 10_000
     with line_relay(BAUD, stats_path) as relay, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as firmware:
         conn = mavutil.mavlink_connection(relay.pty_device, baud=BAUD, source_system=255)
