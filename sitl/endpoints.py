@@ -11,10 +11,12 @@ from __future__ import annotations
 import os
 import socket
 import tty
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from sitl.line import FrameGate, SerialLine  # noqa: E402
 
 READ_SIZE_BYTES = 65536
 """Bytes read per readable descriptor per poll."""
@@ -31,6 +33,13 @@ class EndpointError(Exception):
     """An endpoint could not be opened; the message is one line naming the endpoint."""
 
 
+def _parser():
+    """A MAVLink parser/packer with the vehicle's ids that reports garbage as BAD_DATA, never raises."""
+    mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+    mav.robust_parsing = True
+    return mav
+
+
 class _Peer:
     """One byte stream (or datagram source) with its own MAVLink parser and packer."""
 
@@ -41,8 +50,7 @@ class _Peer:
         self.backlog = b""
         self.outbox: list[bytes] = []
         """Packed messages not yet written."""
-        self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self.mav.robust_parsing = True
+        self.mav = _parser()
 
     def pack(self, msg) -> bytes:
         buf = msg.pack(self.mav)
@@ -71,6 +79,18 @@ class Endpoint:
         for peer in self.peers:
             peer.outbox.append(peer.pack(msg))
 
+    def send_marker(self, msg) -> None:
+        """Queue the lockstep marker (TIMESYNC) for every peer; it goes after what is queued."""
+        self.send(msg)
+
+    def arrivals(self) -> Iterator[tuple[object, _Peer]]:
+        """Messages that became due without anything to read (a line delivering in sim time)."""
+        return iter(())
+
+    def line_stats(self) -> dict | None:
+        """The serial line's counters per direction, if this endpoint has one."""
+        return None
+
     def flush(self) -> None:
         for peer in list(self.peers):
             if peer.outbox:
@@ -87,10 +107,11 @@ class Endpoint:
         if data:
             yield from self._decode(peer, data)
 
-    def _decode(self, peer: _Peer, data: bytes) -> Iterator[tuple[object, _Peer]]:
-        """The messages in ``data``; garbage and unknown message ids are counted, never raised."""
+    def _decode(self, peer: _Peer, data: bytes, parser=None) -> Iterator[tuple[object, _Peer]]:
+        """The messages in ``data`` (parsed by ``parser``, default the peer's); garbage and unknown
+        message ids are counted, never raised."""
         try:
-            msgs = peer.mav.parse_buffer(data) or []
+            msgs = (parser or peer.mav).parse_buffer(data) or []
         except mavlink.MAVError:
             self.bad_frames += 1
             return
@@ -271,11 +292,23 @@ class TcpConnectEndpoint(Endpoint):
 
 
 class PtyEndpoint(Endpoint):
-    """A pseudo-terminal pair in raw mode: MAVLink on the master, clients open ``device`` as a serial port."""
+    """A pseudo-terminal pair in raw mode: MAVLink on the master, clients open ``device`` as a serial port.
+
+    With ``downlink`` and ``uplink`` lines (``rover-sitl --pty --baud``) both directions go through
+    the serial line model in sim time (``now_s``): what the vehicle sends is offered to the
+    downlink frame by frame, each whole or not at all (as ArduPilot checks a port's room before
+    it sends), and written to the pty as the line delivers it, whole frames only (``FrameGate``);
+    what the client writes is parsed, offered frame by frame to the uplink the same way, and
+    parsed again as the line delivers it, corrupted bytes and all (a bad CRC is a bad frame).
+    The lockstep marker and its answer are not traffic of a real vehicle: they bypass the line
+    (else a full line would stop sim time, and with it the line) and the marker has a sequence
+    counter of its own, so the vehicle's MAVLink ``seq`` stays gap-free for a link-health count.
+    """
 
     kind = "pty"
 
-    def __init__(self) -> None:
+    def __init__(self, downlink: SerialLine | None = None, uplink: SerialLine | None = None,
+                 now_s: Callable[[], float] | None = None) -> None:  # fmt: skip
         master_fd, slave_fd = os.openpty()
         tty.setraw(slave_fd)
         os.set_blocking(master_fd, False)
@@ -284,6 +317,60 @@ class PtyEndpoint(Endpoint):
         # Keeping the slave open means a client closing it does not hang up the master (EIO).
         self.slave_fd = slave_fd
         self.peers.append(_Peer(master_fd, None))
+        if (downlink is None) != (uplink is None) or (downlink is not None and now_s is None):
+            raise ValueError("a pty line needs a downlink, an uplink and a clock")
+        self.downlink, self.uplink, self.now_s = downlink, uplink, now_s
+        self.bypass: Callable[[object], bool] | None = None
+        """Received messages that skip the uplink (the emulator sets it to "is the marker's answer")."""
+        self._gate = FrameGate()
+        self._express: list[bytes] = []
+        self._marker_mav = _parser()
+        self._line_parser = _parser()
+
+    def send_marker(self, msg) -> None:
+        if self.downlink is None:
+            return super().send_marker(msg)
+        self._express.append(msg.pack(self._marker_mav))
+        self._marker_mav.seq = (self._marker_mav.seq + 1) % 256
+
+    def flush(self) -> None:
+        if self.downlink is None:
+            return super().flush()
+        t_s = self.now_s()
+        for peer in list(self.peers):
+            for packet in peer.outbox:
+                self._gate.accepted(self.downlink.offer(packet, t_s, whole=True))
+            peer.outbox = []
+            out = self._gate.release(self.downlink.take(t_s)) + b"".join(self._express)
+            self._express = []
+            if out:
+                self._write(peer, out)
+
+    def poll(self, fd: int) -> Iterator[tuple[object, _Peer]]:
+        if self.uplink is None:
+            yield from super().poll(fd)
+            return
+        peer = next((p for p in self.peers if p.fd == fd), None)
+        data = self._read(peer) if peer is not None else b""
+        t_s = self.now_s()
+        for msg, _ in self._decode(peer, data) if data else ():
+            if self.bypass is not None and self.bypass(msg):
+                yield msg, peer
+            else:
+                self.uplink.offer(bytes(msg.get_msgbuf()), t_s, whole=True)
+        yield from self.arrivals()
+
+    def arrivals(self) -> Iterator[tuple[object, _Peer]]:
+        if self.uplink is None or not self.peers:
+            return
+        data = self.uplink.take(self.now_s())
+        if data:
+            yield from self._decode(self.peers[0], data, self._line_parser)
+
+    def line_stats(self) -> dict | None:
+        if self.downlink is None or self.uplink is None:
+            return None
+        return {"downlink": self.downlink.stats.as_dict(), "uplink": self.uplink.stats.as_dict()}
 
     def close(self) -> None:
         super().close()

@@ -11,10 +11,14 @@ Used by ``rover-ctl sim``, the tests, the benchmarks and ``python -m sitl.demo``
 open) and raises ``SitlError`` with the emulator's last stderr line if it exits or stays silent
 for ``start_timeout_s``. Both pipes are drained by threads for the whole run, so a chatty
 emulator never blocks on a full pipe; each can also be copied to a file as it comes.
+
+``line_relay`` starts ``python -m sitl.line_relay`` (ArduPilot's firmware behind a serial line on
+a pty) the same way.
 """
 
 from __future__ import annotations
 
+import json
 import signal
 import socket
 import subprocess
@@ -72,6 +76,9 @@ def stop_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout_s: f
 class SitlProcess:
     """A running ``python -m sitl``: its endpoints, its output so far, and how to stop it."""
 
+    name = "rover-sitl"
+    ready_prefix = READY_PREFIX
+
     def __init__(self, argv: list[str], endpoints: list[str], stdout_path: Path | None = None,
                  stderr_path: Path | None = None) -> None:  # fmt: skip
         self.argv = argv
@@ -108,7 +115,7 @@ class SitlProcess:
                 copy.flush()
             if line.startswith(PTY_PREFIX):
                 self.pty_device = line[len(PTY_PREFIX):]
-            elif line.startswith(READY_PREFIX):
+            elif line.startswith(self.ready_prefix):
                 self._ready.set()
         if copy:
             copy.close()
@@ -140,7 +147,7 @@ class SitlProcess:
     @property
     def ready_at(self) -> float | None:
         """``time.perf_counter()`` of the ready line."""
-        return self.line_time(READY_PREFIX)
+        return self.line_time(self.ready_prefix)
 
     def line_time(self, prefix: str) -> float | None:
         """When the first stdout line starting with ``prefix`` arrived (None: not yet)."""
@@ -164,7 +171,7 @@ class SitlProcess:
         if self._ready.wait(timeout_s) and not self._ended.is_set():
             return
         self.stop()
-        raise SitlError(f"rover-sitl did not start (exit {self.returncode}): {self.last_error()}")
+        raise SitlError(f"{self.name} did not start (exit {self.returncode}): {self.last_error()}")
 
     def wait(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
         """Wait for the emulator to exit by itself (``--duration-s``, a kill); kill it after ``timeout_s``."""
@@ -213,3 +220,48 @@ def rover_sitl(*flags: str, **options) -> Iterator[SitlProcess]:
         yield sitl
     finally:
         sitl.stop()
+
+
+LINE_RELAY_READY_PREFIX = "line-relay: ready"
+"""The line ``sitl.line_relay`` prints once its pty and its UDP port are open."""
+
+
+class LineRelayProcess(SitlProcess):
+    """A running ``python -m sitl.line_relay``: ``pty_device``, ``port`` (the firmware's
+    ``--serial0 udpclient:127.0.0.1:PORT``), and ``stats()``, the counters it wrote at exit."""
+
+    name = "line-relay"
+    ready_prefix = LINE_RELAY_READY_PREFIX
+
+    def __init__(self, argv: list[str], port: int, stats_path: Path) -> None:
+        super().__init__(argv, [])
+        self.port = port
+        self.stats_path = stats_path
+
+    def stats(self) -> dict:
+        """The counters of ``--stats`` (written at start, then at exit: read them after ``stop``)."""
+        return json.loads(self.stats_path.read_text())
+
+
+@contextmanager
+def line_relay(baud: float, stats_path: Path, *, byte_error: float = 0.0, speedup: float = 1.0,
+               buffer_bytes: int | None = None, seed: int = 1, port: int | None = None) -> Iterator[LineRelayProcess]:  # fmt: skip
+    """Start the relay from ArduPilot's SITL firmware to a pty (docs/sitl.md, "Serial line") and
+    stop it on exit, so its counters are in ``stats_path``::
+
+        with line_relay(57600, tmp / "line.json", speedup=10) as relay:
+            firmware = start_firmware(..., "--serial0", f"udpclient:127.0.0.1:{relay.port}")
+            conn = mavutil.mavlink_connection(relay.pty_device, baud=57600)
+        relay.stats()["downlink"]["dropped_overflow"]
+    """
+    port = port or free_port(socket.SOCK_DGRAM)
+    argv = [sys.executable, "-m", "sitl.line_relay", "--udpin", f"127.0.0.1:{port}", "--baud", f"{baud:g}",
+            "--byte-error", repr(byte_error), "--speedup", repr(speedup), "--seed", str(seed), "--stats", str(stats_path)]  # fmt: skip
+    if buffer_bytes is not None:
+        argv += ["--buffer-bytes", str(buffer_bytes)]
+    relay = LineRelayProcess(argv, port, stats_path)
+    relay.wait_ready(START_TIMEOUT_S)
+    try:
+        yield relay
+    finally:
+        relay.stop()

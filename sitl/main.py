@@ -21,6 +21,7 @@ from pathlib import Path
 from sitl.clock import FrameClock, LockstepMarker, Pacer
 from sitl.endpoints import Endpoint, EndpointError, PtyEndpoint, mavlink, open_endpoint
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
+from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine
 from sitl.mavlink_vehicle import PARAM_NAMES, LinkParams, MavlinkVehicle
 from sitl.params import RANGEFINDER_SETS, SitlParams, apply_override
 from sitl.truthlog import TruthLog
@@ -35,6 +36,9 @@ DEFAULT_HOME = Home(-35.363261, 149.165230, 584.0, 0.0)
 DEFAULT_FRAME_S = 0.02
 LINK_RNG_SALT = 0x4C494E4B
 """Mixed into --seed for the link-loss draws, so they do not alias the sensor noise streams."""
+DOWNLINK_RNG_SALT = 0x444F574E
+UPLINK_RNG_SALT = 0x55504C4B
+"""Mixed into --seed for the byte errors of the pty line, one stream per direction."""
 
 
 class UsageError(Exception):
@@ -82,6 +86,26 @@ def _positive(text: str) -> float:
     return value
 
 
+def _probability(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a probability 0 <= P < 1, got {text!r}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return value
+
+
 def _non_negative(text: str) -> float:
     try:
         value = float(text)
@@ -115,6 +139,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--endpoint", action="append", default=[], metavar="URL",
                         help=f"udpin:|udpout:|tcpin:|tcp:HOST:PORT, repeatable; the first is the controller's (default {DEFAULT_ENDPOINT})")
     parser.add_argument("--pty", action="store_true", help="also serve MAVLink on a pseudo-terminal and print 'PTY /dev/pts/N'")
+    line = parser.add_argument_group("serial line of --pty (docs/sitl.md, 'Serial line')")
+    line.add_argument("--baud", type=_positive, metavar="N",
+                      help="carry the pty at N baud, 8N1 (N/10 bytes per sim second each way); default: no limit")
+    line.add_argument("--byte-error", type=_probability, default=0.0, metavar="P",
+                      help="probability that a byte on the line arrives changed (needs --baud)")
+    line.add_argument("--line-buffer-bytes", type=_count, default=DEFAULT_BUFFER_BYTES, metavar="N",
+                      help=f"bytes the line buffers each way before it drops (default {DEFAULT_BUFFER_BYTES}, a SiK radio)")
+    line.add_argument("--line-stats", type=Path, metavar="FILE", help="write the line's counters as JSON at exit")
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument("--speedup", type=_positive, default=1.0, metavar="N", help="run at N x real time ('inf': as fast as possible)")
     timing.add_argument("--lockstep", action="store_true", help="advance a frame only when the controller answers its TIMESYNC marker")
@@ -155,8 +187,14 @@ class Emulator:
         self.truth = truth
         self.link_rng = random.Random(seed ^ LINK_RNG_SALT)
         self.stop = False
+        self.markers_repeated = 0
+        """Lockstep markers sent again because no answer came within MARKER_RESEND_S."""
         self.wake_r, self.wake_w = os.pipe()
         os.set_blocking(self.wake_w, False)
+        if lockstep:  # the marker's answer skips a serial line (PtyEndpoint)
+            for endpoint in endpoints:
+                if isinstance(endpoint, PtyEndpoint):
+                    endpoint.bypass = self.marker.is_answer
         if truth is not None:
             vehicle.on_gps = lambda sample: truth.gps(self.clock.t_s, sample)
 
@@ -194,7 +232,7 @@ class Emulator:
     def send_marker(self) -> None:
         marker = mavlink.MAVLink_timesync_message(0, self.clock.t_ns)
         for endpoint in self.endpoints:
-            endpoint.send(marker)
+            endpoint.send_marker(marker)
         self.flush()
         self.marker.sent(self.clock.t_ns)
 
@@ -209,31 +247,40 @@ class Emulator:
         except InterruptedError:
             return False
         answered = False
-        t_s = self.clock.t_s
         for fd in readable:
             endpoint = fds[fd]
             if endpoint is None:
                 os.read(self.wake_r, 512)
                 continue
             peers_before = len(endpoint.peers)
-            for msg, peer in endpoint.poll(fd):
-                if msg.get_type() == "TIMESYNC" and endpoint is self.controller and self.marker.is_answer(msg):
-                    answered = True
-                    continue
-                if msg.get_type() != "TIMESYNC" and self._lost(endpoint, outgoing=False):
-                    continue
-                for reply in self.vehicle.handle(msg, t_s):
-                    if not self._lost(endpoint, outgoing=True):
-                        endpoint.reply(peer, reply)
+            answered = self.receive(endpoint, endpoint.poll(fd)) or answered
             if self.lockstep and endpoint is self.controller and len(endpoint.peers) > peers_before:
                 self.send_marker()  # a controller that just connected gets the marker at once
         self.flush()
+        return answered
+
+    def receive(self, endpoint: Endpoint, received) -> bool:
+        """Apply the (message, peer) pairs of ``endpoint`` at the frame's time; True if one of
+        them answered the lockstep marker."""
+        answered = False
+        t_s = self.clock.t_s
+        for msg, peer in received:
+            if msg.get_type() == "TIMESYNC" and endpoint is self.controller and self.marker.is_answer(msg):
+                answered = True
+                continue
+            if msg.get_type() != "TIMESYNC" and self._lost(endpoint, outgoing=False):
+                continue
+            for reply in self.vehicle.handle(msg, t_s):
+                if not self._lost(endpoint, outgoing=True):
+                    endpoint.reply(peer, reply)
         return answered
 
     # ---- main loop -------------------------------------------------------------------------
     def run(self, duration_s: float | None) -> None:
         while not self.stop:
             t_s = self.clock.t_s
+            for endpoint in self.endpoints:  # what a serial line delivered by t_k
+                self.receive(endpoint, endpoint.arrivals())
             if self.clock.k > 0:
                 for event in self.rover.step(self.clock.frame_s):
                     self._event(event)
@@ -248,6 +295,7 @@ class Emulator:
                 self.send_marker()
                 while not self.stop and not self.serve(self.marker.resend_in_s()):
                     if self.marker.resend_in_s() <= 0:
+                        self.markers_repeated += 1
                         self.send_marker()
             else:
                 self.flush()
@@ -295,9 +343,47 @@ def _join_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+def _check_line_flags(args) -> None:
+    if args.baud is not None and not args.pty:
+        raise UsageError("--baud: only the --pty endpoint has a serial line; add --pty")
+    if args.baud is None:
+        for flag, given in (("--byte-error", args.byte_error != 0.0), ("--line-stats", args.line_stats),
+                            ("--line-buffer-bytes", args.line_buffer_bytes != DEFAULT_BUFFER_BYTES)):  # fmt: skip
+            if given:
+                raise UsageError(f"{flag} needs --baud (the pty has no line without it)")
+
+
+def _pty(args, clock: FrameClock) -> PtyEndpoint:
+    """The --pty endpoint, behind a serial line in sim time when --baud is given."""
+    if args.baud is None:
+        return PtyEndpoint()
+    return PtyEndpoint(SerialLine(args.baud, args.byte_error, args.line_buffer_bytes, args.seed ^ DOWNLINK_RNG_SALT),
+                       SerialLine(args.baud, args.byte_error, args.line_buffer_bytes, args.seed ^ UPLINK_RNG_SALT),
+                       lambda: clock.t_s)  # fmt: skip
+
+
+def _line_summary(stats: dict) -> str:
+    return "; ".join(f"{direction} offered {s['offered']} delivered {s['delivered']} dropped {s['dropped_overflow']} "
+                     f"corrupted {s['corrupted']} peak {s['peak_buffer_bytes']}" for direction, s in stats.items())  # fmt: skip
+
+
+def _write_line_stats(args, endpoints: list[Endpoint], t_s: float, markers_repeated: int) -> None:
+    """``--line-stats``: the line's parameters, the sim time, bad frames received, lockstep
+    markers repeated and each direction's counters."""
+    stats = next((s for e in endpoints if (s := e.line_stats()) is not None), None)
+    record = {"baud": args.baud, "byte_error": args.byte_error, "buffer_bytes": args.line_buffer_bytes,
+              "sim_s": t_s, "bad_frames": sum(e.bad_frames for e in endpoints),
+              "markers_repeated": markers_repeated, **(stats or {})}  # fmt: skip
+    try:
+        args.line_stats.write_text(json.dumps(record) + "\n")
+    except OSError as exc:
+        raise EndpointError(f"--line-stats {args.line_stats}: {exc.strerror or exc}") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
+        _check_line_flags(args)
         world = _world(args)
     except (UsageError, WorldError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -323,26 +409,28 @@ def main(argv: list[str] | None = None) -> int:
     for name, value in args.param:
         vehicle.set_param(name, value)
 
+    clock = FrameClock(args.frame_s)
     endpoints: list[Endpoint] = []
     try:
         for url in args.endpoint or ([] if args.pty else [DEFAULT_ENDPOINT]):
             endpoints.append(open_endpoint(url))
         if args.pty:
-            endpoints.append(PtyEndpoint())
+            endpoints.append(_pty(args, clock))
         truth = None
         if args.truth_log:
             try:
                 truth = TruthLog(open(args.truth_log, "w", encoding="utf-8"))
             except OSError as exc:
                 raise EndpointError(f"--truth-log {args.truth_log}: {exc.strerror or exc}") from None
+        if args.line_stats:
+            _write_line_stats(args, endpoints, 0.0, 0)  # an unwritable file fails now, not at exit
     except EndpointError as exc:
         for endpoint in endpoints:
             endpoint.close()
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
 
-    emulator = Emulator(rover, vehicle, endpoints, FrameClock(args.frame_s), args.lockstep,
-                        args.speedup, truth, args.seed)
+    emulator = Emulator(rover, vehicle, endpoints, clock, args.lockstep, args.speedup, truth, args.seed)
     emulator.install_signals()
     for endpoint in endpoints:
         if isinstance(endpoint, PtyEndpoint):
@@ -354,6 +442,14 @@ def main(argv: list[str] | None = None) -> int:
         emulator.run(args.duration_s)
     finally:
         emulator.close()
+    for endpoint in endpoints:
+        if (stats := endpoint.line_stats()) is not None:
+            print(f"{PROG}: line {args.baud:g} baud: {_line_summary(stats)}", flush=True)
+    if args.line_stats:
+        try:
+            _write_line_stats(args, endpoints, emulator.clock.t_s, emulator.markers_repeated)
+        except EndpointError as exc:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
     print(f"{PROG}: stopped at t={emulator.clock.t_s:.2f} s, {sum(e.bad_frames for e in endpoints)} bad frames ignored", flush=True)
     return 0
 
