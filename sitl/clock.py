@@ -10,8 +10,10 @@ import math
 import time
 
 NS_PER_S = 1_000_000_000
-MARKER_RESEND_S = 1.0
-"""An unanswered lockstep marker is sent again after this many wall seconds (UDP may drop it)."""
+MARKER_RESEND_S = 0.2
+"""An unanswered lockstep marker is sent again after this many wall seconds (UDP may drop it, a
+byte error on a serial line may hide it): well under the daemon's vehicle-link timeout (0.4 s of
+silence), so a lost marker is not taken for a silent vehicle."""
 
 
 class FrameClock:

@@ -79,8 +79,9 @@ class Endpoint:
         for peer in self.peers:
             peer.outbox.append(peer.pack(msg))
 
-    def send_marker(self, msg) -> None:
-        """Queue the lockstep marker (TIMESYNC) for every peer; it goes after what is queued."""
+    def send_marker(self, msg, repeat: bool = False) -> None:
+        """Queue the lockstep marker (TIMESYNC) for every peer; it goes after what is queued.
+        ``repeat``: the same marker again, unanswered so far."""
         self.send(msg)
 
     def arrivals(self) -> Iterator[tuple[object, _Peer]]:
@@ -291,6 +292,10 @@ class TcpConnectEndpoint(Endpoint):
         self.peers.append(_Peer(sock.fileno(), sock, address))
 
 
+MAX_FRAME_BYTES = 280
+"""The longest MAVLink 2 frame (10 header + 255 payload + 2 CRC + 13 signature)."""
+
+
 class PtyEndpoint(Endpoint):
     """A pseudo-terminal pair in raw mode: MAVLink on the master, clients open ``device`` as a serial port.
 
@@ -327,9 +332,14 @@ class PtyEndpoint(Endpoint):
         self._marker_mav = _parser()
         self._line_parser = _parser()
 
-    def send_marker(self, msg) -> None:
+    def send_marker(self, msg, repeat: bool = False) -> None:
         if self.downlink is None:
-            return super().send_marker(msg)
+            return super().send_marker(msg, repeat)
+        if repeat:
+            # A byte error in a length byte can leave the client's parser waiting for the rest of
+            # a frame that the stopped line will never bring, with the marker inside it. Zeros
+            # complete that frame (it fails its CRC) and start none: the repeat is then read.
+            self._express.append(bytes(MAX_FRAME_BYTES))
         self._express.append(msg.pack(self._marker_mav))
         self._marker_mav.seq = (self._marker_mav.seq + 1) % 256
 

@@ -229,10 +229,10 @@ class Emulator:
         for endpoint in self.endpoints:
             endpoint.flush()
 
-    def send_marker(self) -> None:
+    def send_marker(self, repeat: bool = False) -> None:
         marker = mavlink.MAVLink_timesync_message(0, self.clock.t_ns)
         for endpoint in self.endpoints:
-            endpoint.send_marker(marker)
+            endpoint.send_marker(marker, repeat)
         self.flush()
         self.marker.sent(self.clock.t_ns)
 
@@ -296,7 +296,7 @@ class Emulator:
                 while not self.stop and not self.serve(self.marker.resend_in_s()):
                     if self.marker.resend_in_s() <= 0:
                         self.markers_repeated += 1
-                        self.send_marker()
+                        self.send_marker(repeat=True)
             else:
                 self.flush()
                 next_s = t_s + self.clock.frame_s
@@ -414,8 +414,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for url in args.endpoint or ([] if args.pty else [DEFAULT_ENDPOINT]):
             endpoints.append(open_endpoint(url))
-        if args.pty:
-            endpoints.append(_pty(args, clock))
+        if args.pty:  # behind a serial line it is the controller's link (lockstep gating, link faults)
+            endpoints.insert(0 if args.baud is not None else len(endpoints), _pty(args, clock))
         truth = None
         if args.truth_log:
             try:

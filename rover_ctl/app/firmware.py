@@ -16,6 +16,7 @@ navigation item's seq), never from STATUSTEXT wording.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -31,7 +32,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.app.sim import STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
-from sitl.launch import free_port, stop_process
+from sitl.launch import free_port, line_relay, stop_process
 
 SHARED_DIR = Path(os.environ.get("ROVER_CTL_SHARED") or Path(__file__).resolve().parents[2].parent / "shared")
 """../shared beside the checkout, or $ROVER_CTL_SHARED (a git worktree elsewhere)."""
@@ -131,6 +132,8 @@ class FirmwareRun(SimRun):
         self._truth_file: Any = None
         self._boot_ms: int | None = None
         self._next_watcher_wall = 0.0
+        self._relay_stack = contextlib.ExitStack()
+        self._relay: Any = None
 
     def _firmware_command(self) -> list[str]:
         o: FirmwareOptions = self.options  # type: ignore[assignment]
@@ -142,16 +145,24 @@ class FirmwareRun(SimRun):
                                 speedup=1.0 if o.lockstep else o.speedup,
                                 serial_ports=[self.vehicle_port, self.watch_port], firmware_dir=o.firmware_dir)  # fmt: skip
 
-    def _daemon_command(self) -> list[str]:
-        cmd = super()._daemon_command()
-        cmd[cmd.index("--vehicle") + 1] = f"udpin:127.0.0.1:{self.vehicle_port}"
-        return cmd
+    def _vehicle_url(self) -> str:
+        """The daemon's vehicle link: the firmware's SERIAL0 on UDP, or the line relay's pty."""
+        if self.options.line_baud:
+            return f"{self._relay.pty_device},{self.options.line_baud}"
+        return f"udpin:127.0.0.1:{self.vehicle_port}"
 
     def start(self) -> None:
-        """The daemon and the watcher listen first, then the firmware dials both."""
+        """The daemon (behind the line relay, with ``line_baud``) and the watcher listen first,
+        then the firmware dials both."""
         if self.workdir.exists():
             shutil.rmtree(self.workdir)
         self.workdir.mkdir(parents=True)
+        o = self.options
+        if o.line_baud:
+            # SERIAL0 dials the relay, which serves the line on a pty in the firmware's time.
+            self._relay = self._relay_stack.enter_context(line_relay(
+                o.line_baud, self.line_stats_path, byte_error=o.line_byte_error, speedup=1.0 if o.lockstep else o.speedup,
+                seed=o.seed, port=self.vehicle_port))  # fmt: skip
         self._start_daemon()
         self.watcher = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
@@ -173,6 +184,7 @@ class FirmwareRun(SimRun):
 
     def stop(self) -> None:
         super().stop()
+        self._relay_stack.close()  # the relay writes the line's counters as it stops
         if self._truth_file is not None and not self._truth_file.closed:
             self._truth_file.close()
 

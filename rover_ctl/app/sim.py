@@ -129,6 +129,13 @@ class SimOptions:
     """MAVLink 2 signing key of the GCS link, for the daemon (a key file in a private temporary
     folder, removed at the end) and this ground station. None: the daemon runs without signing
     (never with the user's own key)."""
+    line_baud: int | None = None
+    """The vehicle link over a serial line of this many baud (docs/sitl.md, "Serial line"):
+    rover-sitl's ``--pty --baud``, the firmware behind ``sitl.line_relay``; the daemon opens the
+    pty as ``DEVICE,BAUD``. The line's counters are written to ``line.json`` in the run folder.
+    None: a TCP (rover-sitl) or UDP (firmware) socket on loopback."""
+    line_byte_error: float = 0.0
+    """With ``line_baud``: the probability that a byte on the line arrives changed."""
 
 
 @dataclass
@@ -241,11 +248,24 @@ class SimRun:
                     "--write-world", str(self.world_path)]  # fmt: skip
         for item in o.sitl_params:
             cmd += ["--param", item]
+        if o.line_baud:
+            cmd += ["--pty", "--baud", str(o.line_baud), "--byte-error", repr(o.line_byte_error),
+                    "--line-stats", str(self.line_stats_path)]  # fmt: skip
         return cmd
+
+    @property
+    def line_stats_path(self) -> Path:
+        return self.out / "line.json"
+
+    def _vehicle_url(self) -> str:
+        """Where the daemon reaches the vehicle: the emulator's TCP port, or its pty at the line's baud."""
+        if self.options.line_baud:
+            return f"{self.sitl.pty_device},{self.options.line_baud}"
+        return f"tcp:127.0.0.1:{self.vehicle_port}"
 
     def _daemon_command(self) -> list[str]:
         o = self.options
-        cmd = [*ROVER_CTL, "run", "--vehicle", f"tcp:127.0.0.1:{self.vehicle_port}",
+        cmd = [*ROVER_CTL, "run", "--vehicle", self._vehicle_url(),
                "--gcs", f"udpin:127.0.0.1:{self.gcs_port}", "--rulebase", o.rulebase, "--log-run", str(self.daemon_log_run),
                "--mission-store", str(o.mission_store or ""), "--signing-key-file", str(self.signing_key_path) if self._key_dir else ""]  # fmt: skip
         for item in o.config_overrides:
@@ -257,7 +277,9 @@ class SimRun:
         if self.options.signing_key is not None:
             self._key_dir = tempfile.mkdtemp(prefix="rover-ctl-sim-")
             KeyStore(self.signing_key_path).save_key(self.options.signing_key)
-        endpoints = [f"tcpin:127.0.0.1:{self.vehicle_port}", f"udpin:127.0.0.1:{self.watch_port}"]
+        endpoints = [f"udpin:127.0.0.1:{self.watch_port}"]
+        if not self.options.line_baud:  # else the daemon's vehicle link is the emulator's pty
+            endpoints.insert(0, f"tcpin:127.0.0.1:{self.vehicle_port}")
         try:
             self.sitl = start_sitl(*self._sitl_flags(), endpoints=endpoints, stdout_path=self.out / "sitl.out",
                                    stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip

@@ -166,6 +166,7 @@ class Autopilot:
         self._commanded_speed_mps = 0.0
         self._pose: Pose | None = None
         self._ranges: Mapping[int, RangeReading] = {}
+        self._sensor_rates_hz: Mapping[str, float] = {}
         self._remembered_s: dict[int, float] = {}  # time of the last reading put into the memory
         self._last_said: str | None = None
         self._mission_started = False
@@ -370,10 +371,11 @@ class Autopilot:
             dt_s = max(t_s - self._last_step_s, 1e-3)
         self._last_step_s = t_s
         self._pose, self._ranges = pose, readings.ranges
-        self._loop = loop = self.loop_rate.step(t_s)
+        self._sensor_rates_hz = readings.sensor_rates_hz
+        odometry_hz = max(readings.sensor_rates_hz.values(), default=None)
+        self._loop = loop = self.loop_rate.step(t_s, odometry_hz)
         if loop.changed:
-            daemon = self.config.daemon
-            self._say(loop.text(daemon.control_rate_hz, daemon.max_step_travel_m), Severity.WARNING if loop.slow else Severity.INFO)
+            self._say(loop.text(self.config.daemon.max_step_travel_m), Severity.WARNING if loop.slow else Severity.INFO)
         if self._sensors_since_s is None and readings.ranges:
             self._sensor_seen(min(r.time_s for r in readings.ranges.values()))
         since = self._sensors_since_s
@@ -614,6 +616,8 @@ class Autopilot:
             fence_error=self.fence_error,
             first_waypoint_en=self.frame.to_enu(first.x, first.y) if first is not None and self.frame is not None else None,
             max_distance_m=self.config.autopilot.arming_max_distance_m,
+            sensor_rates_hz=self._sensor_rates_hz,
+            min_sensor_rate_hz=self.config.failsafe.min_sensor_rate_hz,
         )
 
     def _plan_rangefinders(self, present: set[int]) -> None:

@@ -33,8 +33,8 @@ autopilot) and those ``params.required_rangefinders`` names (``[-1]``: the used 
 A silent required one is HOLD; a silent used one that is not required blocks its side and limits
 the speed to ``degraded_speed_mps``; others are not watched.
 
-Rates: odometry messages measured on the link below ``min_sensor_rate_hz`` hold the rover (a line
-that cannot carry what the estimator needs); rangefinders that report slowly limit the speed to
+Rates: odometry messages measured on the link below ``min_sensor_rate_hz`` hold a driving rover (a
+line that cannot carry what the estimator needs; before that, the arming checks refuse); rangefinders that report slowly limit the speed to
 ``range_travel_m`` per reading interval.
 """
 
@@ -186,13 +186,18 @@ class Failsafes:
         gcs_action = GCS_ACTIONS[p.gcs_action]
         gcs_bad = math.isfinite(inputs.gcs_age_s) and inputs.gcs_age_s > p.gcs_timeout_s
         check(self._gcs, "GCS lost", gcs_bad, gcs_action, p.gcs_action)
-        check(self._gps, "GPS lost", inputs.gps_age_s > p.gps_timeout_s, Action.NONE, "dead reckoning")
-        dr_over = inputs.gps_age_s > p.gps_timeout_s + p.dead_reckoning_max_s
+        # Before the first fix (age inf) and the first estimate there is nothing to lose: the
+        # arming checks wait for them ("no position").
+        had_fix = math.isfinite(inputs.gps_age_s)
+        check(self._gps, "GPS lost", had_fix and inputs.gps_age_s > p.gps_timeout_s, Action.NONE, "dead reckoning")
+        dr_over = had_fix and inputs.gps_age_s > p.gps_timeout_s + p.dead_reckoning_max_s
         check(self._dead_reckoning_over, "GPS lost too long", dr_over, Action.HOLD, "hold")
-        check(self._estimator, "estimator", not inputs.estimator_healthy, Action.HOLD, "unhealthy, hold", p.estimator_unhealthy_s)
+        unhealthy = inputs.position_en is not None and not inputs.estimator_healthy
+        check(self._estimator, "estimator", unhealthy, Action.HOLD, "unhealthy, hold", p.estimator_unhealthy_s)
         fence_action = FENCE_ACTIONS[p.fence_action]
         check(self._fence, "fence breach", not inputs.inside_fence, fence_action, p.fence_action)
-        slow = sorted((hz, name) for name, hz in inputs.sensor_rates_hz.items() if hz < p.min_sensor_rate_hz)
+        # Only while driving: a vehicle still booting sends nothing yet; arming checks the rates.
+        slow = sorted((hz, name) for name, hz in inputs.sensor_rates_hz.items() if hz < p.min_sensor_rate_hz and inputs.driving)
         what = f"{slow[0][1]} {slow[0][0]:.1f} Hz, hold" if slow else ""
         check(self._sensor_rate, "sensor rate", bool(slow), Action.HOLD, what)
 

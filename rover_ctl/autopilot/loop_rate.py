@@ -12,6 +12,8 @@ failsafe owns gaps) and, while it is low:
   control steps: ``speed_limit_mps = max_step_travel_m * rate_hz``. At the nominal 25 Hz and the
   default 0.1 m that is 2.5 m/s, above any cruise speed, so a loop that keeps up is never limited.
 
+The target is the control rate, or the odometry's measured rate where the line brings less (the
+loop cannot step faster than new data comes; the link budget and its failsafes own that case).
 Hysteresis: slow below ``slow_loop_fraction`` of the target rate, recovered above the midpoint
 between that and the target, so a rate on the edge does not flap.
 """
@@ -34,14 +36,16 @@ class LoopRateState:
     """The travel-per-step speed limit while slow, else None."""
     changed: bool
     """The slow flag changed at this step (say so)."""
+    target_hz: float = 0.0
+    """What the loop was measured against."""
 
-    def text(self, target_hz: float, max_step_travel_m: float) -> str:
+    def text(self, max_step_travel_m: float) -> str:
         """What to tell the ground station when ``changed``. The limit follows the rate while the
         loop stays slow, so the text names the rule, not one figure that would go stale."""
         if self.slow:
-            return (f"Control loop slow: {self.rate_hz:.1f} Hz of {target_hz:g} Hz, "
+            return (f"Control loop slow: {self.rate_hz:.1f} Hz of {self.target_hz:g} Hz, "
                     f"speed limited to {max_step_travel_m:g} m per step")  # fmt: skip
-        return f"Control loop back to {self.rate_hz:.1f} Hz of {target_hz:g} Hz"
+        return f"Control loop back to {self.rate_hz:.1f} Hz of {self.target_hz:g} Hz"
 
 
 class LoopRate:
@@ -52,9 +56,12 @@ class LoopRate:
         self._times: deque[float] = deque()
         self.slow = False
 
-    def step(self, t_s: float) -> LoopRateState:
-        """Record a control step at vehicle time ``t_s``."""
+    def step(self, t_s: float, expected_hz: float | None = None) -> LoopRateState:
+        """Record a control step at vehicle time ``t_s``. ``expected_hz``: the rate the loop can
+        reach at best, when the vehicle's data comes slower than ``control_rate_hz`` (a slow
+        line: there is no step without new odometry); default the control rate."""
         p = self.params
+        target_hz = min(p.control_rate_hz, expected_hz) if expected_hz else p.control_rate_hz
         if self._times and t_s < self._times[-1]:
             self._times.clear()  # the vehicle's clock restarted: measure afresh
         self._times.append(t_s)
@@ -67,10 +74,10 @@ class LoopRate:
             rate_hz = 1.0 / median_s if median_s > 0 else None
         was = self.slow
         if rate_hz is not None:
-            slow_hz = p.slow_loop_fraction * p.control_rate_hz
+            slow_hz = p.slow_loop_fraction * target_hz
             if rate_hz < slow_hz:
                 self.slow = True
-            elif rate_hz >= (slow_hz + p.control_rate_hz) / 2.0:
+            elif rate_hz >= (slow_hz + target_hz) / 2.0:
                 self.slow = False
         limit = p.max_step_travel_m * rate_hz if self.slow and rate_hz is not None else None
-        return LoopRateState(rate_hz, self.slow, limit, self.slow != was)
+        return LoopRateState(rate_hz, self.slow, limit, self.slow != was, target_hz)

@@ -45,6 +45,9 @@ class ArmingInputs:
     """Why the stored fence could not be used, if it could not."""
     first_waypoint_en: EN | None = None
     max_distance_m: float = math.inf
+    sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
+    """Odometry messages measured on the vehicle link (ATTITUDE, WHEEL_DISTANCE)."""
+    min_sensor_rate_hz: float = 0.0
 
 
 def failures(inputs: ArmingInputs) -> list[str]:
@@ -59,6 +62,9 @@ def failures(inputs: ArmingInputs) -> list[str]:
     silent = [o for o in inputs.needed_orientations if inputs.range_ages_s.get(o, math.inf) > inputs.rangefinder_timeout_s]
     if silent:
         found.append("rangefinder missing: " + ", ".join(ORIENTATION_NAMES.get(o, str(o)) for o in silent))
+    slow = [f"{name} {hz:.1f} Hz" for name, hz in sorted(inputs.sensor_rates_hz.items()) if hz < inputs.min_sensor_rate_hz]
+    if slow:
+        found.append(f"link too slow: {', '.join(slow)} < {inputs.min_sensor_rate_hz:g} Hz")
     if inputs.position_en is not None:
         where = fence_violation(inputs.fence, inputs.position_en)
         if where:

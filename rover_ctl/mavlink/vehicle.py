@@ -303,8 +303,10 @@ class VehicleLink:
             return items
         decoded = 0
         while decoded < max_frames:
-            if not self._parsed and not self._read():
-                break
+            if not self._parsed:
+                if not self._read():
+                    break
+                continue  # a read may hold no whole frame (a partial one, or bytes a line corrupted)
             msg = self._parsed.popleft()
             decoded += 1
             item = self._decode(msg)
@@ -397,8 +399,9 @@ class VehicleLink:
         if self.vehicle is not None and msg.get_srcSystem() != self.target_system:
             return None  # another system on a shared link (a second GCS, a companion computer)
         self.frames_received += 1
-        self.health.frame(self.vehicle_time_s, kind, (msg.get_srcSystem(), msg.get_srcComponent()), msg.get_seq(),
-                          len(msg.get_msgbuf()))  # fmt: skip
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if not (kind == "TIMESYNC" and source == self.lockstep_source):  # markers have a sequence of their own
+            self.health.frame(self.vehicle_time_s, kind, source, msg.get_seq(), len(msg.get_msgbuf()))
         if kind == "TIMESYNC":
             if msg.tc1 != 0:
                 return None  # a response: we send no requests of our own

@@ -30,6 +30,8 @@ SQUARE = ((-50.0, -50.0), (50.0, -50.0), (50.0, 50.0), (-50.0, 50.0))
         ({"first_waypoint_en": (3000.0, 4000.0)}, "first waypoint 5000 m from home"),
         ({"fence": Fence(exclusion_circles=(Circle((0.0, 12000.0), 5.0),))}, "fence 11995 m from home"),
         ({"fence_error": "fence item 0: circle radius 0"}, "fence unusable: fence item 0: circle radius 0"),
+        ({"sensor_rates_hz": {"ATTITUDE": 10.0, "WHEEL_DISTANCE": 2.5}, "min_sensor_rate_hz": 4.0},
+         "link too slow: WHEEL_DISTANCE 2.5 Hz < 4 Hz"),
     ],
 )
 def test_each_check_names_its_reason(change, reason):

@@ -291,3 +291,16 @@ def test_a_serial_line_at_the_wrong_baud_rate_is_a_clear_error():
         link.close()
         os.close(master)
         os.close(slave)
+
+
+def test_a_read_holding_only_part_of_a_frame_is_no_error(pair):
+    """On a serial line a read can end mid-frame (or hold only bytes a byte error broke): poll
+    returns what is whole and keeps the rest for the next read."""
+    link, vehicle, _ = pair
+    frame = vehicle.mav.attitude_encode(4000, 0, 0, 0.25, 0, 0, 0.0).pack(vehicle.mav)
+    vehicle.mav.seq = (vehicle.mav.seq + 1) % 256
+    vehicle.write(frame[:10])
+    link.wait_readable(0.5)
+    assert [i for i in link.poll() if isinstance(i, Attitude)] == []
+    vehicle.write(frame[10:])
+    assert drain(link, Attitude).time_s == 4.0

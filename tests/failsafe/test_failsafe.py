@@ -98,12 +98,13 @@ def test_slow_rangefinders_limit_the_speed_to_a_bounded_travel_per_reading():
 
 def test_odometry_slower_than_the_minimum_holds_and_says_which():
     fs = Failsafes(PARAMS)
-    d = step(fs, 0.0, sensor_rates_hz={"ATTITUDE": 25.0, "WHEEL_DISTANCE": 2.5})
+    assert step(fs, 0.0, driving=False, sensor_rates_hz={"WHEEL_DISTANCE": 0.0}).action is Action.NONE  # arming's business
+    d = step(fs, 0.0, driving=True, sensor_rates_hz={"ATTITUDE": 25.0, "WHEEL_DISTANCE": 2.5})
     assert d.action is Action.HOLD and texts(d) == ["FS sensor rate: WHEEL_DISTANCE 2.5 Hz, hold"]
-    assert step(fs, 0.1, sensor_rates_hz={"ATTITUDE": 25.0, "WHEEL_DISTANCE": 10.0}).action is Action.HOLD  # recovery_s
-    d = step(fs, 0.1 + PARAMS.recovery_s, sensor_rates_hz={"ATTITUDE": 25.0, "WHEEL_DISTANCE": 10.0})
+    assert step(fs, 0.1, driving=True, sensor_rates_hz={"ATTITUDE": 25.0, "WHEEL_DISTANCE": 10.0}).action is Action.HOLD  # recovery_s
+    d = step(fs, 0.1 + PARAMS.recovery_s, driving=True, sensor_rates_hz={"ATTITUDE": 25.0, "WHEEL_DISTANCE": 10.0})
     assert d.action is Action.NONE and texts(d) == ["FS sensor rate cleared"]
-    assert step(fs, 10.0, sensor_rates_hz={}).action is Action.NONE  # a rover without encoders: nothing measured
+    assert step(fs, 10.0, driving=True, sensor_rates_hz={}).action is Action.NONE  # a rover without encoders: nothing measured
 
 
 def test_silent_required_rangefinder_holds_and_says_which():
@@ -225,3 +226,14 @@ def test_stuck_tries_start_over_after_getting_free():
         step(fs, 6.1 + k * 0.1, commanded_speed_mps=0.5, position_en=(-0.3 + k * 0.1, 0.0))
     trace = run_stuck(fs, 11.1, 15.3, (4.7, 0.0))
     assert any(texts(d) == ["FS stuck: backing off (1/2)"] for _, d in trace)
+
+
+def test_nothing_to_lose_before_the_first_fix_and_the_first_estimate():
+    """A vehicle still booting (no GPS fix yet, no estimate) is not a GPS or estimator failsafe:
+    the arming checks wait for a position instead."""
+    fs = Failsafes(PARAMS)
+    for k in range(40):
+        d = step(fs, k * 0.5, gps_age_s=math.inf, estimator_healthy=False, position_en=None, driving=False)
+        assert d.action is Action.NONE and not d.reasons
+    d = step(fs, 20.0, gps_age_s=1.5)  # once there was a fix, losing it counts
+    assert "GPS lost" in d.reasons
