@@ -6,8 +6,12 @@
 It listens on loopback UDP for the firmware's ``--serial0 udpclient:127.0.0.1:PORT``, opens a
 pseudo-terminal, prints ``PTY /dev/pts/N`` and then ``line-relay: ready (...)``, and relays both
 ways through the serial line model (``sitl/line.py``): firmware -> pty is the downlink, pty ->
-firmware the uplink, each with its own buffer, byte errors and counters. The line's time is wall
-time x ``--speedup``, so a firmware run at ``--speedup S`` gets the same line in its own time.
+firmware the uplink, each with its own buffer, byte errors and counters. The line runs in the
+firmware's time: the boot time its messages carry (``time_boot_ms`` of ATTITUDE, SYSTEM_TIME,
+DISTANCE_SENSOR, ...); only after ``STAMP_STALE_S`` of wall time without one does it run on wall
+time x ``--speedup``. A firmware that falls behind its speed-up on a loaded machine, then catches
+up in a burst, so gets the line it would have had in its own time, not a wall-clock line that a
+catch-up burst would overflow; before its first timestamp, wall time x ``--speedup``.
 SIGTERM or SIGINT stops it; it then prints the counters and writes them to ``--stats`` as JSON.
 
 One thread, one ``select``: the timeout is when the next byte leaves either line, but never less
@@ -30,6 +34,7 @@ import time
 import tty
 from pathlib import Path
 
+from sitl.endpoints import _parser
 from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine, check_line
 
 PROG = "line-relay"
@@ -38,6 +43,9 @@ TICK_S = 0.002
 """Shortest wall-clock wait between deliveries (bytes due meanwhile go together)."""
 IDLE_WAIT_S = 1.0
 """Wall-clock wait when both lines are empty (a signal or a datagram wakes it sooner)."""
+STAMP_STALE_S = 1.0
+"""Wall seconds without a timestamp from the firmware after which the line runs on the wall clock
+(x speedup) again: a firmware sending only untimed messages (heartbeats)."""
 READ_SIZE_BYTES = 65536
 MAX_DATAGRAM_BYTES = 1400
 """Uplink bytes are sent to the firmware in datagrams of at most this size."""
@@ -128,10 +136,41 @@ class Relay:
         self.wake_r, self.wake_w = os.pipe()
         os.set_blocking(self.wake_w, False)
         self.wall0 = time.monotonic()
+        self._stamps = _parser()
+        self._stamp: tuple[float, float] | None = None
+        """(the firmware's latest boot time in seconds, the wall time it arrived)."""
+        self._now_s = 0.0
+        self._offset_s = 0.0
+        """Line time minus the firmware's boot time, fixed at its first timestamp (no jump then)."""
 
     def now_s(self) -> float:
-        """The line's time: wall time since start x speedup."""
-        return (time.monotonic() - self.wall0) * self.args.speedup
+        """The line's time in the firmware's seconds (module doc); never goes back."""
+        wall = time.monotonic()
+        if self._stamp is None:
+            now = (wall - self.wall0) * self.args.speedup
+        else:
+            vehicle_s, at = self._stamp
+            # The firmware's clock alone moves the line; only a firmware silent on time for
+            # STAMP_STALE_S gets the wall-clock line (heartbeats still have to cross it).
+            stale_s = wall - at - STAMP_STALE_S
+            now = self._offset_s + vehicle_s + (stale_s * self.args.speedup if stale_s > 0 else 0.0)
+        self._now_s = max(self._now_s, now)
+        return self._now_s
+
+    def _note_time(self, data: bytes) -> None:
+        """The newest ``time_boot_ms`` in a datagram from the firmware (whole frames)."""
+        try:
+            frames = self._stamps.parse_buffer(data) or []
+        except Exception:  # not MAVLink after all: the clock just does not move
+            return
+        stamps = [f.time_boot_ms for f in frames if hasattr(f, "time_boot_ms")]
+        if stamps:
+            vehicle_s = max(stamps) / 1000.0
+            wall = time.monotonic()
+            if self._stamp is None or wall - self._stamp[1] >= STAMP_STALE_S:
+                self._offset_s = self.now_s() - vehicle_s  # (back) on the firmware's clock, no jump
+            if self._stamp is None or vehicle_s > self._stamp[0]:
+                self._stamp = (vehicle_s, wall)
 
     def install_signals(self) -> None:
         signal.set_wakeup_fd(self.wake_w)
@@ -170,6 +209,7 @@ class Relay:
                 return
             self.firmware = address
             self.downlink.offer(data, self.now_s())
+            self._note_time(data)
 
     def _from_pty(self) -> None:
         try:
