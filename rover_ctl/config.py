@@ -98,6 +98,9 @@ class LinkParams:
     radio_txbuf_low_pct: float = 50.0
     """RADIO_STATUS.txbuf (free space of the local radio's transmit buffer, percent) below which
     the daemon sends RC overrides less often, as ArduPilot slows its streams."""
+    radio_status_timeout_s: float = 3.0
+    """A RADIO_STATUS older than this (wall seconds) no longer thins the overrides: the radio was
+    reset or stopped reporting (a SiK radio sends one a second)."""
     override_min_hz: float = 4.0
     """The slowest the daemon refreshes RC overrides when its radio's buffer is full (well inside
     ArduPilot's RC_OVERRIDE_TIME, 3 s by default)."""

@@ -346,6 +346,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("link.health_period_s", "LINK_HLTH_PER", 0.5, 3600.0, RW, {}),
     ("link.radio_txbuf_low_pct", "LINK_TXBUF_LOW", 0.0, 100.0, RW, {"units": "%"}),
     ("link.override_min_hz", "LINK_RC_MIN", 0.5, 50.0, RW, {}),
+    ("link.radio_status_timeout_s", "LINK_RADIO_TMO", 0.5, 60.0, RW, {}),
     ("autopilot.loiter_radius_m", "LOIT_RADIUS", 0.1, 100.0, RW, {}),
     ("autopilot.mission_restart", "MIS_RESTART", 0, 1, RW, {}),
     ("autopilot.arming_max_distance_m", "ARMING_MAX_DIST", 1.0, 1.0e6, RW, {}),

@@ -167,8 +167,10 @@ class Relay:
         if stamps:
             vehicle_s = max(stamps) / 1000.0
             wall = time.monotonic()
-            if self._stamp is None or wall - self._stamp[1] >= STAMP_STALE_S:
-                self._offset_s = self.now_s() - vehicle_s  # (back) on the firmware's clock, no jump
+            if self._stamp is None or wall - self._stamp[1] >= STAMP_STALE_S or vehicle_s < self._stamp[0] - STAMP_STALE_S:
+                # (Back) on the firmware's clock, or a rebooted one's, without a jump.
+                self._offset_s = self.now_s() - vehicle_s
+                self._stamp = (vehicle_s, wall)
             if self._stamp is None or vehicle_s > self._stamp[0]:
                 self._stamp = (vehicle_s, wall)
 
@@ -208,8 +210,8 @@ class Relay:
             except (BlockingIOError, ConnectionRefusedError):
                 return
             self.firmware = address
+            self._note_time(data)  # first: a catch-up burst is offered at its own time
             self.downlink.offer(data, self.now_s())
-            self._note_time(data)
 
     def _from_pty(self) -> None:
         try:

@@ -126,6 +126,8 @@ class Daemon:
         self._rates_from_s = math.inf
         """Vehicle time from which the measured odometry rates reflect the plan (one window after asking)."""
         self._next_health_wall_s = 0.0
+        self._odometry_rates: dict[str, float] = {}
+        self._streams_checked_s = math.inf
         self._next_override_wall_s = 0.0
 
     @property
@@ -201,6 +203,7 @@ class Daemon:
         link.request_streams(plan)
         self._streams_requested_wall_s = time.monotonic()
         self._rates_from_s = link.vehicle_time_s + self.config.link.rate_window_s
+        self._streams_checked_s = self._rates_from_s + self.config.link.rate_window_s
         self._planned_rangefinders = count
         if plan != self.stream_plan:
             log.info("vehicle link budget: %s", plan.describe())
@@ -215,12 +218,26 @@ class Daemon:
         self.stream_plan = plan
 
     def _sensor_rates(self) -> dict[str, float]:
-        """Measured odometry rates for the failsafe, once the plan's rates can have arrived."""
+        """Measured odometry rates for the failsafes and the loop-rate target, once the plan's
+        rates can have arrived; meanwhile (a re-plan) the last ones measured before it."""
         link = self.link
         now = link.vehicle_time_s
-        if now < self._rates_from_s:
-            return {}
-        return {n: hz for n in ("ATTITUDE", "WHEEL_DISTANCE") if (hz := link.health.rate_hz(n, now)) is not None}
+        if now >= self._rates_from_s:
+            self._odometry_rates = {n: hz for n in ("ATTITUDE", "WHEEL_DISTANCE") if (hz := link.health.rate_hz(n, now)) is not None}
+        return self._odometry_rates
+
+    def _check_streams(self) -> None:
+        """Two windows after asking, once: a planned message arriving at less than half its rate
+        (a request lost on a noisy line, a vehicle that forgot) is asked for again."""
+        link, plan = self.link, self.stream_plan
+        if plan is None or link.vehicle_time_s < self._streams_checked_s:
+            return
+        self._streams_checked_s = math.inf
+        wanted = {"ATTITUDE": plan.rates_hz.get(budget.EXTRA1, 0.0), "GPS_RAW_INT": plan.rates_hz.get("GPS_RAW_INT", 0.0)}
+        short = [n for n, hz in wanted.items() if hz > 0 and (link.health.rate_hz(n, link.vehicle_time_s) or 0.0) < hz / 2]
+        if short:
+            log.warning("vehicle link: %s below half the rate asked: asking again", ", ".join(short))
+            self._request_streams()
 
     def _report_link(self) -> None:
         """Every ``link.health_period_s``: what the vehicle link carried, in the log and the event log."""
@@ -296,6 +313,7 @@ class Daemon:
         self._check_silence()
         if self.autopilot.rangefinder_plan is not None and self._rangefinder_count() != self._planned_rangefinders:
             self._request_streams()  # the rover's rangefinders are known now: budget them
+        self._check_streams()
         self._report_link()
         self.gcs.poll(time.monotonic())
         self._note_gcs_heartbeat()
@@ -452,8 +470,9 @@ class Daemon:
     def _radio_full(self) -> bool:
         """The local telemetry radio reports its transmit buffer nearly full (RADIO_STATUS.txbuf),
         the signal ArduPilot's own stream code backs off on."""
-        radio = self.link.radio
-        return radio is not None and radio.txbuf_pct < self.config.link.radio_txbuf_low_pct
+        radio, p = self.link.radio, self.config.link
+        return (radio is not None and radio.txbuf_pct < p.radio_txbuf_low_pct
+                and time.monotonic() - radio.wall_s <= p.radio_status_timeout_s)  # fmt: skip
 
     # ---- the control step ------------------------------------------------------------------------
 
@@ -493,6 +512,7 @@ class Daemon:
             gcs_age_s=math.inf if gcs_s is None else max(0.0, t_s - gcs_s),
             gps_age_s=math.inf if self.last_fix_s is None else max(0.0, t_s - self.last_fix_s),
             sensor_rates_hz=self._sensor_rates(),
+            odometry_planned_hz=self.stream_plan.rates_hz.get(budget.EXTRA1) if self.stream_plan else None,
         )
 
     def _check_silence(self) -> None:
@@ -524,11 +544,9 @@ class Daemon:
             present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.autopilot.mission.fence else 0)
             reasons = self.autopilot.state().failsafes
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)
-            stats = self.link.health
-            sent = stats.frames + stats.lost
-            drop_cpct = round(10_000 * stats.lost / sent) if sent else 0
+            health = self.link.health
             self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed,
-                                     drop_rate_cpct=drop_cpct, errors_comm=stats.crc_errors)  # fmt: skip
+                                     drop_rate_cpct=round(100 * health.loss_pct), errors_comm=health.crc_errors)  # fmt: skip
         if self.estimator is None or not self.estimator.initialised or not self.gcs.pose_due(now):
             return
         pose = self.estimator.pose()

@@ -100,6 +100,8 @@ class Readings:
     """Since the last GPS fix (fix_type >= 2; inf: none yet)."""
     sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
     """Measured on the vehicle link: ATTITUDE and WHEEL_DISTANCE, each once it has arrived."""
+    odometry_planned_hz: float | None = None
+    """The odometry rate the link budget asked for (what the loop can expect before a measurement)."""
 
 
 @dataclass(frozen=True)
@@ -372,7 +374,7 @@ class Autopilot:
         self._last_step_s = t_s
         self._pose, self._ranges = pose, readings.ranges
         self._sensor_rates_hz = readings.sensor_rates_hz
-        odometry_hz = max(readings.sensor_rates_hz.values(), default=None)
+        odometry_hz = max(readings.sensor_rates_hz.values(), default=readings.odometry_planned_hz)
         self._loop = loop = self.loop_rate.step(t_s, odometry_hz)
         if loop.changed:
             self._say(loop.text(self.config.daemon.max_step_travel_m), Severity.WARNING if loop.slow else Severity.INFO)
@@ -411,6 +413,7 @@ class Autopilot:
             gcs_age_s=readings.gcs_age_s,
             gps_age_s=readings.gps_age_s,
             range_ages_s={o: max(0.0, t_s - r.time_s) for o, r in readings.ranges.items()},
+            range_times_s={o: r.time_s for o, r in readings.ranges.items()},
             estimator_healthy=pose is not None and pose.healthy,
             inside_fence=position is None or self.planner is None or self.planner.is_inside_fence(position),
             driving=self.armed and self.mode in modes.DRIVING_MODES,

@@ -88,6 +88,8 @@ class FailsafeInputs:
     commanded_speed_mps: float = 0.0
     position_en: EN | None = None
     """Estimated position, for the stuck test."""
+    range_times_s: Mapping[int, float] = field(default_factory=dict)
+    """Vehicle time of the last DISTANCE_SENSOR per orientation (the reading interval)."""
     sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
     """Measured rate on the vehicle link of each odometry message that has arrived at all
     (ATTITUDE, WHEEL_DISTANCE); one below ``min_sensor_rate_hz`` holds the rover."""
@@ -217,7 +219,7 @@ class Failsafes:
         blocked = frozenset(o for o, rf in self._ranges.items() if rf.active)
         degraded = any(rf.active and o not in required for o, rf in self._ranges.items())
         limit = p.degraded_speed_mps if degraded else None
-        interval_s = self._range_intervals(now_s, inputs.range_ages_s, blocked)
+        interval_s = self._range_intervals(inputs.range_times_s, blocked)
         if interval_s is not None:
             limit = min(limit if limit is not None else math.inf, p.range_travel_m / interval_s)
 
@@ -227,16 +229,15 @@ class Failsafes:
         reasons = tuple(actions)
         return FailsafeDecision(action, reasons, tuple(events), blocked, self._gps.active, replan, self._tries, limit)
 
-    def _range_intervals(self, now_s: float, ages_s: Mapping[int, float], blocked: frozenset[int]) -> float | None:
+    def _range_intervals(self, times_s: Mapping[int, float], blocked: frozenset[int]) -> float | None:
         """The longest smoothed interval between two readings of a used, reporting rangefinder.
-        A reading is new when its time (now - age) moved on; the interval is smoothed over a few
+        A reading is new when its time moved on; the interval is smoothed over a few
         readings so one late message does not brake the rover; a gap longer than
         ``rangefinder_timeout_s`` is a silence, the failsafe's business, and is not counted."""
         for orientation in self.used_rangefinders:
-            age_s = ages_s.get(orientation)
-            if age_s is None or not math.isfinite(age_s):
+            seen_s = times_s.get(orientation)
+            if seen_s is None:
                 continue
-            seen_s = now_s - age_s
             last_s = self._range_seen_s.get(orientation)
             # A gap longer than the timeout is a silence (the failsafe above), not a rate.
             if last_s is not None and last_s + 1e-9 < seen_s <= last_s + self.params.rangefinder_timeout_s:

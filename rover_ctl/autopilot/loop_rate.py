@@ -26,6 +26,10 @@ from dataclasses import dataclass
 from rover_ctl.config import DaemonParams
 
 
+MEDIAN_EVERY = 5
+"""Steps between two computations of the median interval (the rate moves slowly)."""
+
+
 @dataclass(frozen=True)
 class LoopRateState:
     rate_hz: float | None
@@ -54,6 +58,8 @@ class LoopRate:
     def __init__(self, params: DaemonParams) -> None:
         self.params = params
         self._times: deque[float] = deque()
+        self._steps = 0
+        self._rate_hz: float | None = None
         self.slow = False
 
     def step(self, t_s: float, expected_hz: float | None = None) -> LoopRateState:
@@ -67,11 +73,15 @@ class LoopRate:
         self._times.append(t_s)
         while len(self._times) > 2 and t_s - self._times[1] >= p.loop_rate_window_s:
             self._times.popleft()
-        rate_hz = None
-        if t_s - self._times[0] >= p.loop_rate_window_s:
-            intervals = sorted(b - a for a, b in zip(self._times, list(self._times)[1:]))
+        self._steps += 1
+        if t_s - self._times[0] < p.loop_rate_window_s:
+            self._rate_hz = None
+        elif self._rate_hz is None or self._steps % MEDIAN_EVERY == 0:  # a sort per step is more than it needs
+            times = list(self._times)
+            intervals = sorted(b - a for a, b in zip(times, times[1:]))
             median_s = intervals[len(intervals) // 2]
-            rate_hz = 1.0 / median_s if median_s > 0 else None
+            self._rate_hz = 1.0 / median_s if median_s > 0 else None
+        rate_hz = self._rate_hz
         was = self.slow
         if rate_hz is not None:
             slow_hz = p.slow_loop_fraction * target_hz

@@ -1,7 +1,7 @@
 """The vehicle link's byte budget: which messages the daemon asks for, and at what rates.
 
-A SiK telemetry radio at 57600 baud carries 5760 bytes per second each way (8N1: ten bits per
-byte); the messages a controller could ask for add up to three times that. So the daemon asks only
+A serial line at 57600 baud carries 5760 bytes per second each way (8N1: ten bits per byte; a SiK
+radio shares its air rate between the two directions, which the share below leaves room for); the messages a controller could ask for add up to three times that. So the daemon asks only
 for what it reads, turns the rest off, and picks each rate so that the total stays inside a share
 of the line (``link.line_use_max``), leaving the rest for what it cannot schedule (heartbeats,
 command acknowledgements, STATUSTEXT, ArduPilot's TIMESYNC probes).
@@ -13,7 +13,7 @@ refuses it), which also carries ATTITUDE and messages the daemon does not read (
 SET_MESSAGE_INTERVAL. rover-sitl behaves the same (sitl/mavlink_vehicle.py).
 
 The rates come from a priority order (``TIERS``): every stream first gets its minimum; then,
-while the budget lasts, position and odometry for the estimator up to ``daemon.core_rate_hz``,
+while the budget lasts, GPS to ``daemon.gps_rate_hz`` and odometry up to ``daemon.core_rate_hz``,
 the rangefinders for avoidance up to the same, odometry and attitude up to the control rate, the
 rangefinders up to their configured rate, then everything else. A tier that does not fit whole is
 filled as far as it goes and the fill stops there. Sizes are the MAVLink 2 frames: measured
@@ -41,6 +41,9 @@ EXTRA1 = "EXTRA1"
 EXTRA1_UNREAD = ("SIMSTATE", "AHRS2", "PID_TUNING", "RPM", "ESC_TELEMETRY_1_TO_4")
 """Messages ArduPilot Rover sends in EXTRA1 that the daemon does not read (SIMSTATE is asked for
 separately when ground truth is wanted)."""
+MIN_RATE_MARGIN = 1.5
+"""The odometry stream is never planned below this times the failsafe's minimum rate, so that one
+late or lost frame does not read as a line too slow to drive on."""
 FIXED_RATES_HZ = {"HEARTBEAT": 1.0}
 """What the vehicle sends whatever it is asked: counted against the budget, never requested."""
 
@@ -76,9 +79,10 @@ def serial_baud(url: str) -> int | None:
 
 
 def is_serial(url: str) -> bool:
-    """A serial device rather than a network endpoint (pymavlink's rule: no ``scheme:`` prefix)."""
-    scheme = url.split(":", 1)[0] if ":" in url else ""
-    return scheme not in ("udp", "udpin", "udpout", "udpbcast", "tcp", "tcpin", "file", "mcast")
+    """A serial device rather than a network endpoint, by pymavlink's rule: a device (before any
+    ``,BAUD``) with a ``:`` in it is a network address (``udpin:``, ``tcp:``, ``127.0.0.1:14550``,
+    ...); ``/dev/ttyUSB0`` or ``COM4`` is serial."""
+    return ":" not in url.split(",", 1)[0]
 
 
 @dataclass(frozen=True)
@@ -118,10 +122,11 @@ class StreamPlan:
 
 def streams(daemon: DaemonParams, failsafe: FailsafeParams, rangefinders: int, truth: bool) -> list[Stream]:
     """What the daemon reads, with its minimum and wanted rates (``rangefinders``: how many
-    DISTANCE_SENSOR the vehicle sends per period). The odometry minimum is the failsafe's: below
-    it the rover holds, so planning less would plan a rover that cannot drive."""
+    DISTANCE_SENSOR the vehicle sends per period). The odometry minimum is the failsafe's with a
+    margin: below the failsafe's the rover holds, so planning that close would plan a rover that
+    holds on one late frame."""
     out = [
-        Stream(EXTRA1, ("WHEEL_DISTANCE", "ATTITUDE"), 1, failsafe.min_sensor_rate_hz, daemon.sensor_rate_hz),
+        Stream(EXTRA1, ("WHEEL_DISTANCE", "ATTITUDE"), 1, MIN_RATE_MARGIN * failsafe.min_sensor_rate_hz, daemon.sensor_rate_hz),
         Stream("GPS_RAW_INT", ("GPS_RAW_INT",), 1, daemon.min_gps_rate_hz, daemon.gps_rate_hz),
         Stream("SYS_STATUS", ("SYS_STATUS",), 1, daemon.status_rate_hz, daemon.status_rate_hz),
     ]

@@ -16,8 +16,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 SEQ_MODULO = 256
-REORDER_LIMIT = 128
-"""A ``seq`` jump of this or more is a duplicate or a reordered frame, not that many lost."""
+DUPLICATE_WINDOW = 8
+"""A frame up to this many numbers behind the last one is a duplicate or a late (reordered UDP)
+frame: not counted, and the counter stays. Any other jump counts as that many lost (a dropout of
+more than half the sequence space reads as its remainder modulo 256: the counter cannot tell)."""
 
 
 @dataclass(frozen=True)
@@ -31,13 +33,7 @@ class LinkStats:
     crc_errors: int
     garbage: int
     """Frames or bytes that were not MAVLink at all (no frame start, unknown message)."""
-
-    @property
-    def loss_pct(self) -> float:
-        """Frames lost of frames sent, from the sequence numbers (a frame dropped for its CRC left
-        a gap too, so it is counted once, as lost)."""
-        sent = self.frames + self.lost
-        return 100.0 * self.lost / sent if sent else 0.0
+    loss_pct: float
 
     def describe(self, names: tuple[str, ...] = ()) -> str:
         shown = names or tuple(sorted(self.rates_hz))
@@ -66,11 +62,9 @@ class LinkHealth:
         """A decoded frame from the vehicle at vehicle time ``t_s``."""
         self.frames += 1
         last = self._seq.get(source)
-        gap = 0 if last is None else (seq - last - 1) % SEQ_MODULO
-        if gap < REORDER_LIMIT:
-            self.lost += gap
+        if last is None or (last - seq) % SEQ_MODULO > DUPLICATE_WINDOW:
+            self.lost += 0 if last is None else (seq - last - 1) % SEQ_MODULO
             self._seq[source] = seq
-        # else: a duplicate or a late frame; the counter stays where the newest one left it
         times = self._times.get(name)
         if times is None:
             times = self._times[name] = deque()
@@ -84,6 +78,13 @@ class LinkHealth:
     def window_s(self) -> float:
         """Read on every use: a changed parameter applies at once."""
         return self._window()
+
+    @property
+    def loss_pct(self) -> float:
+        """Frames lost of frames sent, from the sequence numbers (a frame dropped for its CRC left
+        a gap too, so it is counted once, as lost)."""
+        sent = self.frames + self.lost
+        return 100.0 * self.lost / sent if sent else 0.0
 
     def bad_crc(self) -> None:
         self.crc_errors += 1
@@ -114,4 +115,4 @@ class LinkHealth:
             self._bytes.popleft()
         rates = {name: r for name in self._times if (r := self.rate_hz(name, now_s)) is not None}
         rx = sum(n for _, n in self._bytes) / self.window_s
-        return LinkStats(rates, rx, self.frames, self.lost, self.crc_errors, self.garbage)
+        return LinkStats(rates, rx, self.frames, self.lost, self.crc_errors, self.garbage, self.loss_pct)

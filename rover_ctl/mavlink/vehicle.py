@@ -65,6 +65,8 @@ LOCKSTEP_ANNOUNCEMENT = b"lockstep"
 markers (rover-sitl --lockstep; ArduPilot puts the first 8 bytes of its git hash there)."""
 READ_SIZE_BYTES = 65536
 """Largest read from the connection at once (a UDP datagram is at most this)."""
+MAX_READS_PER_POLL = 16
+"""Reads of the connection in one ``poll`` (each up to READ_SIZE_BYTES)."""
 WRONG_BAUD_BYTES = 4096
 """Bytes received without a single MAVLink frame after which a serial line is called wrong (at
 57600 a vehicle sends that in well under two seconds)."""
@@ -131,6 +133,8 @@ class RadioStatus:
     """Free space in the local radio's transmit buffer, percent."""
     rx_errors: int
     fixed: int
+    wall_s: float = 0.0
+    """When it arrived (wall clock): a radio that stops reporting is not believed for ever."""
 
 
 @dataclass(frozen=True)
@@ -301,12 +305,15 @@ class VehicleLink:
         items, self._held = self._held, []
         if self.link_error is not None and self._wall() < self._retry_wall_s:
             return items
-        decoded = 0
+        decoded = reads = 0
         while decoded < max_frames:
             if not self._parsed:
-                if not self._read():
+                # A read may hold no whole frame (a partial one, bytes a line corrupted); bounded,
+                # so that a stream of junk cannot keep the loop from its step and its failsafes.
+                reads += 1
+                if reads > MAX_READS_PER_POLL or not self._read():
                     break
-                continue  # a read may hold no whole frame (a partial one, or bytes a line corrupted)
+                continue
             msg = self._parsed.popleft()
             decoded += 1
             item = self._decode(msg)
@@ -394,7 +401,7 @@ class VehicleLink:
         if msg.get_srcSystem() == self.params.source_system:
             return None  # our own frames echoed by a broadcast medium
         if kind == "RADIO_STATUS":  # the telemetry radio speaks with its own system id
-            self.radio = RadioStatus(msg.rssi, msg.remrssi, msg.txbuf, msg.rxerrors, msg.fixed)
+            self.radio = RadioStatus(msg.rssi, msg.remrssi, msg.txbuf, msg.rxerrors, msg.fixed, self._wall())
             return self.radio
         if self.vehicle is not None and msg.get_srcSystem() != self.target_system:
             return None  # another system on a shared link (a second GCS, a companion computer)

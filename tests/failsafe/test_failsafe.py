@@ -79,8 +79,7 @@ def test_silent_rangefinder_not_required_blocks_its_side_at_the_degraded_speed()
     assert d.blocked_orientations == {2, 4, 6}
     assert step(fs, 2.1, range_ages_s=FRESH_RANGES | {1: 0.9}).blocked_orientations == {4, 6}
     d = step(fs, 4.2, range_ages_s=FRESH_RANGES)
-    # Not degraded any more; what is left is the rate limit: front read 0.1 s apart at the start.
-    assert d.blocked_orientations == set() and d.speed_limit_mps == pytest.approx(PARAMS.range_travel_m / 0.1)
+    assert d.blocked_orientations == set() and d.speed_limit_mps is None
 
 
 def test_slow_rangefinders_limit_the_speed_to_a_bounded_travel_per_reading():
@@ -89,11 +88,11 @@ def test_slow_rangefinders_limit_the_speed_to_a_bounded_travel_per_reading():
     limits = []
     for k in range(60):  # front at 20 Hz, right at 5 Hz (0.2 s apart: not silent)
         t = k * 0.05
-        d = step(fs, t, range_ages_s={0: 0.0, 2: t % 0.2})
+        d = step(fs, t, range_ages_s={0: 0.0, 2: t % 0.2}, range_times_s={0: t, 2: t - t % 0.2})
         limits.append(d.speed_limit_mps)
     assert limits[-1] == pytest.approx(PARAMS.range_travel_m / 0.2, rel=0.02)
     fs.used_rangefinders = frozenset({0})  # the slow one no longer read: only the 20 Hz one counts
-    assert step(fs, 3.0, range_ages_s={0: 0.0, 2: 0.1}).speed_limit_mps == pytest.approx(PARAMS.range_travel_m / 0.05, rel=0.02)
+    assert step(fs, 3.0, range_ages_s={0: 0.0, 2: 0.1}, range_times_s={0: 3.0, 2: 2.9}).speed_limit_mps == pytest.approx(PARAMS.range_travel_m / 0.05, rel=0.02)
 
 
 def test_odometry_slower_than_the_minimum_holds_and_says_which():

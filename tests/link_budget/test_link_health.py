@@ -45,6 +45,13 @@ def test_duplicates_and_reordering_are_not_counted_as_losses():
     assert health.lost == 0
 
 
+def test_a_long_dropout_is_counted_and_the_counter_follows_it():
+    health = LinkHealth(2.0)
+    for seq in [*range(0, 50), *range(200, 256), *range(0, 10)]:  # 150 frames never arrived
+        health.frame(0.0, "ATTITUDE", (1, 1), seq, 40)
+    assert health.lost == 150
+
+
 def test_bad_crcs_and_garbage_are_counted():
     health = LinkHealth(2.0)
     feed(health, "ATTITUDE", 10.0, 1.0)
@@ -65,6 +72,11 @@ def test_mean_frame_size_per_message():
 def test_the_window_is_read_live():
     window = [2.0]
     health = LinkHealth(lambda: window[0])
-    feed(health, "ATTITUDE", 10.0, 10.0)
-    window[0] = 4.0
-    assert health.window_s == 4.0 and health.rate_hz("ATTITUDE", 10.0) == pytest.approx(10.0, rel=0.05)
+    feed(health, "ATTITUDE", 10.0, 8.0)
+    feed(health, "ATTITUDE", 20.0, 2.0, start_s=8.0, seq0=80)
+    assert health.rate_hz("ATTITUDE", 10.0) == pytest.approx(20.0, rel=0.05)
+    window[0] = 4.0  # half the window at 10 Hz, half at 20 Hz (frames older than a window are gone)
+    health2 = LinkHealth(lambda: window[0])
+    feed(health2, "ATTITUDE", 10.0, 8.0)
+    feed(health2, "ATTITUDE", 20.0, 2.0, start_s=8.0, seq0=80)
+    assert health2.window_s == 4.0 and health2.rate_hz("ATTITUDE", 10.0) == pytest.approx(15.0, rel=0.05)

@@ -94,7 +94,8 @@ def ex_failsafes(d: Daemon) -> list:
             vehicle_age_s=ramp(5, 9, 0.02),
             gcs_age_s=ramp(10, 25, 0.5),
             gps_age_s=ramp(28, 55, 0.1),
-            range_ages_s={0: ramp(62, 65, 0.02), 1: ramp(63, 66, 0.02), 2: 0.02, 4: 0.02, 6: ramp(64, 64.4, 0.02)},
+            range_ages_s=(ages := {0: ramp(62, 65, 0.02), 1: ramp(63, 66, 0.02), 2: 0.02, 4: 0.02, 6: ramp(64, 64.4, 0.02)}),
+            range_times_s={o: t - a for o, a in ages.items()},
             estimator_healthy=not 57.0 <= t < 58.5,
             inside_fence=not 60.0 <= t < 61.0,
             driving=t >= 66.0,
@@ -271,7 +272,7 @@ def ex_link(d: Daemon) -> list:
     clock = [0.0]
     sent: list = []
     records: list = []
-    d.link = SimpleNamespace(radio=RadioStatus(180, 170, 40, 0, 0), vehicle_time_s=0.0, url="udpin:127.0.0.1:1",
+    d.link = SimpleNamespace(radio=RadioStatus(180, 170, 40, 0, 0, 0.0), vehicle_time_s=0.0, url="udpin:127.0.0.1:1",
                              health=LinkHealth(lambda: d.config.link.rate_window_s),
                              send_override=lambda steering, throttle: sent.append(round(clock[0], 3)))  # fmt: skip
     d.events = SimpleNamespace(write=lambda t_s, kind, **fields: records.append((round(clock[0], 3), kind)))
@@ -330,7 +331,8 @@ EXERCISES = {
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
-    "link": (no_mission, ex_link, ("link.radio_txbuf_low_pct", "link.override_min_hz", "link.health_period_s", "link.rate_window_s")),
+    "link": (no_mission, ex_link, ("link.radio_txbuf_low_pct", "link.override_min_hz", "link.health_period_s", "link.rate_window_s",
+                                   "link.radio_status_timeout_s")),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
