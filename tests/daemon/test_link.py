@@ -235,9 +235,13 @@ def test_streams_are_asked_for_from_the_budget_and_nothing_else(pair):
     assert (stop.req_stream_id, stop.start_stop) == (mav.MAV_DATA_STREAM_ALL, 0)
     assert (extra1.req_stream_id, extra1.req_message_rate, extra1.start_stop) == (mav.MAV_DATA_STREAM_EXTRA1, plan.rates_hz["EXTRA1"], 1)
     intervals = {}
-    while (msg := vehicle.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.5)) is not None:
-        assert msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL
-        intervals[mav.mavlink_map[int(msg.param1)].msgname] = msg.param2
+    expected = {"GPS_RAW_INT", "DISTANCE_SENSOR", "SYS_STATUS", "ATTITUDE", *budget.EXTRA1_UNREAD}
+    deadline = time.monotonic() + 5.0
+    while not expected <= set(intervals) and time.monotonic() < deadline:
+        msg = vehicle.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.5)
+        if msg is not None:
+            assert msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL
+            intervals[mav.mavlink_map[int(msg.param1)].msgname] = msg.param2
     assert intervals["GPS_RAW_INT"] == pytest.approx(1e6 / plan.rates_hz["GPS_RAW_INT"])
     assert intervals["DISTANCE_SENSOR"] == pytest.approx(1e6 / plan.rates_hz["DISTANCE_SENSOR"])
     assert intervals["ATTITUDE"] == pytest.approx(1e6 / plan.rates_hz["EXTRA1"])
