@@ -81,7 +81,7 @@ class Endpoint:
 
     def send_marker(self, msg, repeat: bool = False) -> None:
         """Queue the lockstep marker (TIMESYNC) for every peer; it goes after what is queued.
-        ``repeat``: the same marker again, unanswered so far."""
+        ``repeat``: the same marker again, unanswered after a first repeat too."""
         self.send(msg)
 
     def arrivals(self) -> Iterator[tuple[object, _Peer]]:

@@ -293,10 +293,12 @@ class Emulator:
                 break
             if self.lockstep:
                 self.send_marker()
+                repeats = 0
                 while not self.stop and not self.serve(self.marker.resend_in_s()):
                     if self.marker.resend_in_s() <= 0:
                         self.markers_repeated += 1
-                        self.send_marker(repeat=True)
+                        repeats += 1
+                        self.send_marker(repeat=repeats > 1)  # a second repeat: the first was not read either
             else:
                 self.flush()
                 next_s = t_s + self.clock.frame_s
