@@ -11,7 +11,7 @@ sector (``sector_half_deg`` either side of its axis), measured from the sensor.
 Sensor positions are taken on the footprint's edge (front/back at half the length, sides at half
 the width, diagonals at the corners), which is where small rovers mount them.
 
-**Prediction** (``horizon_s`` > 0). Every echo also goes to the obstacle tracker
+**Prediction** (``horizon_s`` > 0). Every echo then also goes to the obstacle tracker
 (``rover_ctl.navigation.tracks``). For each confirmed *moving* track the remembered echoes of
 that track (its trail: where it was) are dropped and its predicted path ``p + v tau`` for
 ``tau`` in ``[0, horizon_s]``, sampled every ``prediction_step_s``, stands in for it. A sensor's
@@ -68,7 +68,7 @@ class ObstacleMemory:
             return
         e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
         east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
-        ident = self.tracker.add(time_s, east, north)
+        ident = self.tracker.add(time_s, east, north) if self.params.horizon_s > 0.0 else 0  # no cost when off
         self._points = np.vstack((self._points, (time_s, east, north, ident)))
 
     def ranges(self, time_s: float, east_m: float, north_m: float, heading_rad: float, latest_m: dict[int, float],
