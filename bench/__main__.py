@@ -4,7 +4,9 @@ Each benchmark is a module ``bench/bench_<name>.py`` with ``run(quick: bool) -> 
 ``{"title": str, "markdown": str, ...figures}``. The dict is written to
 ``bench/results/<name>.json``; the markdown sections are joined into docs/BENCHMARKS.md in name
 order. ``python -m bench [NAME ...] [--quick]`` runs some or all of them; sections of benchmarks not
-run this time are kept from their last JSON.
+run this time are kept from their last JSON. ``python -m bench navigation --only crossing,moving
+--worlds 10`` runs some scenarios of the navigation benchmark on fewer worlds (its other rows are
+kept from the last run, each row dated).
 """
 
 from __future__ import annotations
@@ -30,6 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all: {', '.join(available())})")
     parser.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")
+    parser.add_argument("--only", metavar="SCENARIO,...", help="navigation: run only these scenarios (the other rows are kept from the last run)")
+    parser.add_argument("--worlds", type=int, metavar="N", help="navigation: N seeded worlds per scenario instead of the full counts")
     args = parser.parse_args(argv)
     names = args.names or available()
     unknown = sorted(set(names) - set(available()))
@@ -39,7 +43,14 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         print(f"== bench {name}", flush=True)
         started = time.perf_counter()
-        result = importlib.import_module(f"bench.bench_{name}").run(quick=args.quick)
+        options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds)) if v}
+        if options and name != "navigation":
+            parser.error(f"--only and --worlds apply to the navigation benchmark, not {name}")
+        module = importlib.import_module(f"bench.bench_{name}")
+        unknown = sorted(set(options.get("only", ())) - set(getattr(module, "FULL_WORLDS", ())))
+        if unknown:
+            parser.error(f"unknown scenario(s) {', '.join(unknown)} (known: {', '.join(module.FULL_WORLDS)})")
+        result = module.run(quick=args.quick, **options)
         result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
         result.setdefault("date", time.strftime("%Y-%m-%d"))
         result["wall_s"] = round(time.perf_counter() - started, 1)

@@ -8,6 +8,14 @@ sees them only with its rangefinders):
 * ``walls``: one straight leg of 40 m crossed by two walls, each with a 2.5 m gap off the line.
 * ``cul_de_sac``: a U of walls open towards the rover on the line of a 30 m leg.
 * ``moving``: a 0.6 m drum crossing the 30 m leg at 0.5 m/s, and one travelling against the rover.
+* ``crossing``: crossing traffic on the two legs of ``open``: 2-5 drums (radius 0.3-0.6 m) at
+  0.3-1.0 m/s, each crossing one leg at right angles from either side, timed (seeded, +-3 s) to
+  reach the leg about when a rover at cruise speed gets there.
+
+Variants: the rule bases ``paper`` and ``default``, and ``default+predict``: the default rule base
+with obstacle tracks and prediction on (``proximity.horizon_s`` = ``PREDICT_HORIZON_S``).
+A collision is "moving" when the rover's true speed at the contact was above
+``STOPPED_SPEED_MPS``, else "stopped" (struck while yielding).
 
 Figures per scenario and rule base: success rate (mission complete, no collision, within the
 time budget), collisions, path length over the shortest collision-free path (the planner's
@@ -20,8 +28,10 @@ from __future__ import annotations
 
 import json
 import math
+import random
 import statistics
 import tempfile
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,7 +46,14 @@ from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimError, SimOptions, simulate
 
 HOME = (-35.363261, 149.165230, 584.0)
-RULEBASES = ("paper", "default")
+PREDICT_HORIZON_S = 2.0
+VARIANTS = {"paper": ("paper", []), "default": ("default", []),
+            "default+predict": ("default", [f"proximity.horizon_s={PREDICT_HORIZON_S}"])}  # fmt: skip
+"""Variant name -> (rule base, daemon config overrides)."""
+STOPPED_SPEED_MPS = 0.05
+"""A collision with the rover slower than this (truth) was one it was struck in while stopped."""
+CRUISE_MPS = 1.2
+"""executor.cruise_speed_mps: the crossing traffic is timed for it."""
 WORKERS = 2
 """Simulations run side by side (each is two processes; the machine has 2 cores)."""
 ACCEPTANCE_RADIUS_M = 0.5
@@ -77,6 +94,18 @@ def scenarios(seed: int) -> dict[str, Scenario]:
         _wall((-12.0, 26.0), (-gap1 - 2.5, 26.0)), _wall((-gap1, 26.0), (12.0, 26.0)),
     ]  # fmt: skip
     cul = [_wall((-2.5, 12.0), (-2.5, 17.0)), _wall((-2.5, 17.0), (2.5, 17.0)), _wall((2.5, 17.0), (2.5, 12.0))]
+    rng = random.Random(seed)
+    crossing = []
+    for _ in range(rng.randint(2, 5)):
+        speed, radius, side = rng.uniform(0.3, 1.0), rng.uniform(0.3, 0.6), rng.choice((-1.0, 1.0))
+        if rng.random() < 0.6:  # the first leg, northwards along x = 0
+            along = rng.uniform(6.0, 27.0)
+            arrive_s = along / CRUISE_MPS + rng.uniform(-3.0, 3.0)
+            crossing.append({"center_en": (side * speed * arrive_s, along), "radius_m": radius, "velocity_en": (-side * speed, 0.0)})
+        else:  # the second leg, eastwards along y = 30
+            along = rng.uniform(3.0, 22.0)
+            arrive_s = (30.0 + along) / CRUISE_MPS + rng.uniform(-3.0, 3.0)
+            crossing.append({"center_en": (along, 30.0 + side * speed * arrive_s), "radius_m": radius, "velocity_en": (0.0, -side * speed)})
     return {
         "open": Scenario("open", two_legs),
         "scattered": Scenario("scattered", two_legs, scatter=10),
@@ -86,6 +115,7 @@ def scenarios(seed: int) -> dict[str, Scenario]:
             {"center_en": (-8.0, 12.0), "radius_m": 0.6, "velocity_en": (0.5, 0.0)},
             {"center_en": (0.5, 28.0), "radius_m": 0.5, "velocity_en": (0.0, -0.3)},
         ]),  # fmt: skip
+        "crossing": Scenario("crossing", two_legs, moving=crossing),
     }
 
 
@@ -153,23 +183,36 @@ def turning_deg_per_m(out: Path) -> float:
     return turn / dist if dist > 0 else math.nan
 
 
-def one_run(name: str, rulebase: str, seed: int, root: Path) -> dict[str, Any]:
+def collisions_moving(out: Path) -> tuple[int, int]:
+    """(collisions with the rover moving, with it stopped), from the truth log."""
+    speed, moving, stopped = 0.0, 0, 0
+    for record in read_jsonl(out / "truth.jsonl"):
+        if record["type"] == "state":
+            speed = abs(record["speed_mps"])
+        elif record["type"] == "collision":
+            moving, stopped = (moving + 1, stopped) if speed > STOPPED_SPEED_MPS else (moving, stopped + 1)
+    return moving, stopped
+
+
+def one_run(name: str, variant: str, seed: int, root: Path) -> dict[str, Any]:
     scenario = scenarios(seed)[name]
-    folder = root / f"{name}-{rulebase}-{seed}"
+    rulebase, overrides = VARIANTS[variant]
+    folder = root / f"{name}-{variant}-{seed}"
     folder.mkdir(parents=True)
     mission_path, world_path = write_inputs(scenario, folder)
     options = SimOptions(mission=mission_path, out=folder / "run", world=world_path, obstacles=scenario.scatter or None,
                          seed=seed, rulebase=rulebase, timeout_s=TIME_BUDGET_S,
-                         config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}"])  # fmt: skip
+                         config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}", *overrides])  # fmt: skip
     try:
         metrics = simulate(options, plots=False)
     except SimError as exc:
-        return {"scenario": name, "rulebase": rulebase, "seed": seed, "success": False, "error": str(exc)}
+        return {"scenario": name, "rulebase": variant, "seed": seed, "success": False, "error": str(exc)}
+    moving, stopped = collisions_moving(folder / "run")
     world_used = folder / "run" / "world.geojson" if scenario.scatter else world_path
     shortest = shortest_length_m(scenario, world_used)
     return {
-        "scenario": name, "rulebase": rulebase, "seed": seed, "success": metrics["success"],
-        "timed_out": metrics["timed_out"], "collisions": metrics["collisions"], "path_ratio": metrics["path_length_m"] / shortest if shortest else math.nan,
+        "scenario": name, "rulebase": variant, "seed": seed, "success": metrics["success"],
+        "timed_out": metrics["timed_out"], "collisions": metrics["collisions"], "collisions_moving": moving, "collisions_stopped": stopped, "path_ratio": metrics["path_length_m"] / shortest if shortest else math.nan,
         "duration_s": metrics["duration_s"], "turning_deg_per_m": turning_deg_per_m(folder / "run"),
         "latency_p99_ms": metrics["loop_latency_p99_ms"],
     }  # fmt: skip
@@ -180,34 +223,59 @@ def _mean(values: list[float]) -> float:
     return statistics.fmean(values) if values else math.nan
 
 
-def run(quick: bool) -> dict[str, Any]:
-    seeds = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1} if quick else \
-        {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10}  # fmt: skip
-    jobs = [(name, rb, seed) for name, count in seeds.items() for rb in RULEBASES for seed in range(1, count + 1)]
+FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100}
+QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2}
+PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
+"""With ``only``, the rows of the other scenarios are kept from here (the last run)."""
+
+
+def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -> dict[str, Any]:
+    """All scenarios and variants, or ``only`` these scenarios (the others' rows kept from the
+    last run), on ``worlds`` seeded worlds each instead of the default counts."""
+    counts = dict(QUICK_WORLDS if quick else FULL_WORLDS)
+    unknown = sorted(set(only or ()) - set(counts))
+    if unknown:
+        raise ValueError(f"unknown scenario(s) {', '.join(unknown)} (known: {', '.join(counts)})")
+    if only:
+        counts = {name: counts[name] for name in only}
+    if worlds:
+        counts = {name: worlds for name in counts}
+    jobs = [(name, variant, seed) for name, count in counts.items() for variant in VARIANTS for seed in range(1, count + 1)]
     with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
         runs = list(pool.map(lambda job: one_run(*job, Path(tmp)), jobs))
-    rows = []
-    for name in seeds:
-        for rb in RULEBASES:
-            group = [r for r in runs if r["scenario"] == name and r["rulebase"] == rb]
-            rows.append({
-                "scenario": name, "rulebase": rb, "runs": len(group),
+    today = time.strftime("%Y-%m-%d")
+    fresh = []
+    for name in counts:
+        for variant in VARIANTS:
+            group = [r for r in runs if r["scenario"] == name and r["rulebase"] == variant]
+            fresh.append({
+                "scenario": name, "rulebase": variant, "runs": len(group), "date": today,
                 "success_rate": sum(r["success"] for r in group) / len(group),
                 "collisions": sum(r.get("collisions", 0) for r in group),
+                "collisions_moving": sum(r.get("collisions_moving", 0) for r in group),
+                "collisions_stopped": sum(r.get("collisions_stopped", 0) for r in group),
                 "timeouts": sum(bool(r.get("timed_out")) for r in group),
                 "path_ratio": _mean([r.get("path_ratio") for r in group if r["success"]]),
                 "duration_s": _mean([r.get("duration_s") for r in group if r["success"]]),
                 "turning_deg_per_m": _mean([r.get("turning_deg_per_m") for r in group if r["success"]]),
                 "latency_p99_ms": max((r.get("latency_p99_ms") or 0.0 for r in group), default=math.nan),
             })  # fmt: skip
+    rows = fresh
+    if only and PREVIOUS.exists():
+        previous = json.loads(PREVIOUS.read_text())
+        kept = [dict(r, date=r.get("date", previous.get("date"))) for r in previous.get("rows", []) if r["scenario"] not in counts]
+        runs = [r for r in previous.get("runs", []) if r["scenario"] not in counts] + runs
+        order = list(FULL_WORLDS)
+        rows = sorted(kept + fresh, key=lambda r: (order.index(r["scenario"]) if r["scenario"] in order else len(order), list(VARIANTS).index(r["rulebase"])))
     lines = [
-        "| scenario | rule base | runs | success | collisions | timeouts | path / shortest | time (s) | turning (deg/m) | loop latency p99 (ms, worst run) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| scenario | rule base | runs | success | collisions (moving / stopped) | timeouts | path / shortest | time (s) | turning (deg/m) | loop latency p99 (ms, worst run) | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
+        split = f" ({r['collisions_moving']} / {r['collisions_stopped']})" if "collisions_moving" in r else ""
         lines.append(
-            f"| {r['scenario']} | {r['rulebase']} | {r['runs']} | {r['success_rate']:.0%} | {r['collisions']} | {r['timeouts']} | "
-            f"{r['path_ratio']:.2f} | {r['duration_s']:.1f} | {r['turning_deg_per_m']:.1f} | {r['latency_p99_ms']:.2f} |"
+            f"| {r['scenario']} | {r['rulebase']} | {r['runs']} | {r['success_rate']:.0%} | {r['collisions']}{split} | {r['timeouts']} | "
+            f"{r['path_ratio']:.2f} | {r['duration_s']:.1f} | {r['turning_deg_per_m']:.1f} | {r['latency_p99_ms']:.2f} | {r['date']} |"
         )
     errors = sorted({r["error"] for r in runs if "error" in r})
     markdown = "\n".join(lines)
@@ -222,6 +290,16 @@ def run(quick: bool) -> dict[str, Any]:
         "for a near target, so it slows to a crawl as it closes in and rarely gets inside the 0.5 m "
         "acceptance radius within the time budget, even in the open field."
     )
+    markdown += (
+        f"\n\ndefault+predict: the default rule base with obstacle tracks and prediction "
+        f"(`proximity.horizon_s={PREDICT_HORIZON_S:g}`, docs/perception.md). Collisions (moving / stopped): "
+        f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
+        "the split was added have it). Measured: the date of the run that made the row."
+    )
+    if only or worlds:
+        markdown += (f"\n\n_This run: `--only {','.join(counts)}`" if only else "\n\n_This run: all scenarios") + \
+            (f" on {worlds} worlds each (to fit the wall time; the full counts are {FULL_WORLDS})" if worlds else "") + \
+            "; the other rows are kept from the run named by their date._"  # fmt: skip
     if quick:
         markdown += "\n\n_Quick mode: 1-3 seeds per scenario; the full run uses 100 scattered worlds._"
     if errors:

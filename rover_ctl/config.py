@@ -438,6 +438,33 @@ class ProximityParams:
     sector_half_deg: float = 22.5
     """Each sensor answers for this much either side of its axis: with eight 45 degree directions
     the sectors tile the circle, as AP_Proximity's do."""
+    horizon_s: float = 0.0
+    """Prediction horizon: each sensor's range is also shortened to the closest approach of every
+    moving obstacle track within this many seconds of its predicted path (its own motion only;
+    ``rover_ctl.navigation.proximity``). 0: no prediction, the ranges are the echoes'."""
+    prediction_step_s: float = 0.2
+    """The predicted path is sampled this often (s): at 1 m/s, 0.2 m between samples."""
+    track_gate_m: float = 0.8
+    """An echo joins the nearest track predicted within this distance (m); else it starts one.
+    About an obstacle's radius plus what it moves between two echoes."""
+    track_confirm_hits: int = 4
+    """Echoes before a track counts (a few rangefinder readings: one stray echo is no obstacle)."""
+    track_coast_s: float = 0.8
+    """A track without an echo for this long is dropped."""
+    track_echo_sigma_m: float = 0.1
+    """1-sigma of an echo's position: rangefinder noise plus the pose estimate's step-to-step jitter."""
+    track_accel_sigma_mps2: float = 1.0
+    """White-noise acceleration of the constant-velocity model (m/s^2): a walking person changes
+    speed and direction at about this rate."""
+    track_init_speed_sigma_mps: float = 1.0
+    """1-sigma of a new track's velocity (zero): obstacles move at walking pace or less."""
+    track_min_speed_mps: float = 0.2
+    """A track slower than this is static (what the noise of echoes and pose alone can fake)."""
+    track_max_speed_mps: float = 2.0
+    """A track faster than this is not an obstacle but a beam's echo sliding along a surface as the
+    rover turns: treated as static."""
+    track_max_count: int = 32
+    """Tracks kept at once (bounds the control step's cost); a new one replaces the oldest silent one."""
 
 
 @dataclass

@@ -363,6 +363,17 @@ _DECLARED: tuple[tuple, ...] = (
     ("navigator.missing_range_m", "NAV_MISSING_RNG", 0.0, 100.0, RW, {}),
     ("proximity.memory_s", "PRX_MEMORY", 0.0, 60.0, RW, {}),
     ("proximity.sector_half_deg", "PRX_SECTOR", 1.0, 180.0, RW, {}),
+    ("proximity.horizon_s", "PRX_HORIZON", 0.0, 10.0, RW, {}),
+    ("proximity.prediction_step_s", "PRX_PRED_STEP", 0.02, 2.0, RW, {}),
+    ("proximity.track_gate_m", "PRX_TRK_GATE", 0.05, 10.0, RW, {}),
+    ("proximity.track_confirm_hits", "PRX_TRK_CONFIRM", 1, 100, RW, {}),
+    ("proximity.track_coast_s", "PRX_TRK_COAST", 0.05, 60.0, RW, {}),
+    ("proximity.track_echo_sigma_m", "PRX_TRK_ECHO_SD", 0.001, 10.0, RW, {}),
+    ("proximity.track_accel_sigma_mps2", "PRX_TRK_ACCEL", 0.01, 100.0, RW, {"units": "m/s/s"}),
+    ("proximity.track_init_speed_sigma_mps", "PRX_TRK_VEL_SD", 0.01, 100.0, RW, {}),
+    ("proximity.track_min_speed_mps", "PRX_TRK_MIN_SPD", 0.0, 100.0, RW, {}),
+    ("proximity.track_max_speed_mps", "PRX_TRK_MAX_SPD", 0.0, 100.0, RW, {}),
+    ("proximity.track_max_count", "PRX_TRK_MAX", 1, 1000, RW, {}),
 )
 CONFIG_ONLY = frozenset({"link.vehicle_url", "link.gcs_url", "gcs.mission_store_path", "daemon.log_dir", "gcs.signing_key_path"})
 """Text fields: config file and command line only, never parameters."""

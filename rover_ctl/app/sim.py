@@ -47,11 +47,13 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
 from rover_ctl.autopilot.executor import NAV_COMMANDS  # noqa: E402
+from rover_ctl.config import load_config  # noqa: E402
 from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
 from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mavlink.signing import KeyStore  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
+from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
 from sitl.launch import SitlError, SitlProcess, free_port, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
@@ -75,6 +77,22 @@ GCS_HEARTBEAT_PERIOD_S = 1.0
 GCS_HEARTBEAT_SIM_PERIOD_S = 0.5
 """...and in sim time: the daemon ages the heartbeat in vehicle time, which lockstep runs faster
 than the wall clock; half a second keeps it well inside any sensible GCS failsafe timeout."""
+
+
+BUDGET_MARGIN = 2.0
+"""The default time budget is this many times the mission's nominal duration (its route at the
+mission's speeds plus its holds): detours around obstacles, turns at waypoints, slowing for each
+waypoint and yielding take time the straight route does not count. The bench's default rule base
+drives its obstacle scenarios in at most 1.4x the shortest path, at less than cruise speed."""
+BUDGET_FLOOR_S = 300.0
+"""...and at least this many sim seconds: a short mission still gets time to find its way
+around a cul-de-sac or wait for a crossing obstacle."""
+
+
+def time_budget_s(nominal_s: float) -> float:
+    """Sim seconds a mission of ``nominal_s`` nominal duration
+    (``rover_ctl.mission.summary.nominal_duration_s``) may take before the run counts as failed."""
+    return max(BUDGET_FLOOR_S, BUDGET_MARGIN * nominal_s)
 
 
 class TruthTail:
@@ -118,8 +136,8 @@ class SimOptions:
     rulebase: str = "default"
     lockstep: bool = True
     speedup: float = 1.0
-    timeout_s: float = 600.0
-    """Budget in sim seconds from the start of AUTO."""
+    timeout_s: float | None = None
+    """Budget in sim seconds from the start of AUTO; None: ``time_budget_s`` of the mission."""
     config_overrides: list[str] = field(default_factory=list)
     sitl_params: list[str] = field(default_factory=list)
     """NAME=VALUE for the emulator's --param (e.g. SIM_GPS_GLITCH_X=5)."""
@@ -497,7 +515,15 @@ class SimRun:
         self.arm()
         self.start_mission()
         self.progress.started_sim_s = self.progress.sim_time_s
-        return self.wait_for(lambda p: p.complete, sim_timeout_s=self.options.timeout_s, on_tick=on_tick)
+        return self.wait_for(lambda p: p.complete, sim_timeout_s=self.budget_s, on_tick=on_tick)
+
+    @property
+    def budget_s(self) -> float:
+        """``options.timeout_s``, else the budget scaled from the mission at the daemon's speeds."""
+        if self.options.timeout_s is not None:
+            return self.options.timeout_s
+        config = load_config(None, self.options.config_overrides)
+        return time_budget_s(nominal_duration_s(self.mission, config.executor.cruise_speed_mps, config.robot.max_speed_mps))
 
 
 def simulate(options: SimOptions, on_tick: Callable[[Progress], None] | None = None, plots: bool = True) -> dict[str, Any]:

@@ -506,7 +506,8 @@ class Autopilot:
             if reading.time_s > self._remembered_s.get(orientation, -math.inf):
                 self._remembered_s[orientation] = reading.time_s
                 self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
-        ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()})
+        ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()},
+                                       pose.speed_mps)  # fmt: skip
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
         if decision.speed_limit_mps is not None:  # a blind side, or rangefinders slower than the speed needs

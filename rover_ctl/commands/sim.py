@@ -32,7 +32,8 @@ def add_parser(subparsers) -> None:
     timing.add_argument("--speedup", type=_positive, metavar="X", help="free-running emulator at X times real time")
     parser.add_argument("--out", type=Path, metavar="DIR", help="each sim writes a new numbered run folder here, with its logs and report, and DIR/latest (default runs/<mission>)")
     parser.add_argument("--json", action="store_true", help="print the metrics JSON on stdout (progress goes to stderr)")
-    parser.add_argument("--timeout-s", type=_positive, default=600.0, metavar="S", help="sim-time budget of the mission (default 600)")
+    parser.add_argument("--timeout-s", type=_positive, metavar="S",
+                        help="sim-time budget of the mission (default: twice its route at cruise speed plus its holds, at least 300)")  # fmt: skip
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="daemon config override (repeatable)")
     parser.add_argument("--signing-key", metavar="PASSPHRASE|@FILE",
                         help="MAVLink 2 signing on the GCS link: the daemon and this ground station use this key (as `rover-ctl mission`)")  # fmt: skip

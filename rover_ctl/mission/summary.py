@@ -4,10 +4,16 @@ The route is home, then each NAV_WAYPOINT / NAV_LOITER_TIME position in order, t
 for NAV_RETURN_TO_LAUNCH; leg lengths are geodesic on the WGS84 ellipsoid (pyproj ``Geod``).
 DO_JUMP repeats are not unrolled: the length is one pass through the list. A waypoint at
 lat = lon = 0 means "where the rover is" to ArduPilot and adds no leg.
+
+``nominal_duration_s`` is how long that one pass takes driven exactly: each leg at the speed in
+force (cruise, or the last DO_CHANGE_SPEED, at most the robot's top speed, as the executor does)
+plus the holds (NAV_WAYPOINT and NAV_LOITER_TIME param1, CONDITION_DELAY param1). It is the
+lower bound a time budget is scaled from (``rover_ctl.app.sim.time_budget_s``).
 """
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -60,6 +66,38 @@ def route_latlon(mission: Mission) -> list[tuple[float, float]]:
         elif item.command == Cmd.NAV_RETURN_TO_LAUNCH and home is not None:
             points.append(home)
     return points
+
+
+def nominal_duration_s(mission: Mission, cruise_speed_mps: float, max_speed_mps: float) -> float:
+    """Seconds to drive one pass of the route at the mission's speeds and hold where it says
+    (see the module docstring); 0 for a mission that goes nowhere."""
+    speed = min(cruise_speed_mps, max_speed_mps)
+    home = (mission.home.lat_deg, mission.home.lon_deg) if mission.home is not None else None
+    here = home
+    total_s = 0.0
+    for item in mission.items:
+        hold_s = _finite(item.param1)
+        target = None
+        if item.command in NAV_POSITION_COMMANDS:
+            if not (item.x == 0.0 and item.y == 0.0):
+                target = (item.lat_deg, item.lon_deg)
+            total_s += hold_s
+        elif item.command == Cmd.NAV_RETURN_TO_LAUNCH:
+            target = home
+        elif item.command == Cmd.CONDITION_DELAY:
+            total_s += hold_s
+        elif item.command == Cmd.DO_CHANGE_SPEED and _finite(item.param2) > 0.0:
+            speed = min(item.param2, max_speed_mps)
+        if target is not None:
+            if here is not None and speed > 0.0:
+                total_s += GEOD.line_length([here[1], target[1]], [here[0], target[0]]) / speed
+            here = target
+    return total_s
+
+
+def _finite(value: float) -> float:
+    """A parameter as a duration or speed: NaN and negatives ("unused") count as 0."""
+    return value if math.isfinite(value) and value > 0.0 else 0.0
 
 
 def summarize(mission: Mission) -> MissionSummary:

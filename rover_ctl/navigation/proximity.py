@@ -10,6 +10,18 @@ sector (``sector_half_deg`` either side of its axis), measured from the sensor.
 
 Sensor positions are taken on the footprint's edge (front/back at half the length, sides at half
 the width, diagonals at the corners), which is where small rovers mount them.
+
+**Prediction** (``horizon_s`` > 0). Every echo then also goes to the obstacle tracker
+(``rover_ctl.navigation.tracks``). For each confirmed *moving* track the remembered echoes of
+that track (its trail: where it was) are dropped and its predicted path ``p + v tau`` for
+``tau`` in ``[0, horizon_s]``, sampled every ``prediction_step_s``, stands in for it. A sensor's
+range is then the closest approach of that path inside its sector: the nearest the obstacle will
+come within the horizon, measured from where the rover is now. Only the obstacle's own motion is
+predicted, not the rover's: the rule base was tuned for the rover's motion among static obstacles,
+and a static world (no moving track) gives exactly the ranges it gave without prediction. So a
+pedestrian about to cross ahead reads as an obstacle ahead before it gets there (the rover yields),
+one walking away or clear of the rover's sectors reads no nearer than its echo, and the rover may
+pass behind a crossing obstacle, where its trail would otherwise still read as blocked.
 """
 
 from __future__ import annotations
@@ -20,6 +32,7 @@ from typing import Callable
 import numpy as np
 
 from rover_ctl.config import ProximityParams
+from rover_ctl.navigation.tracks import ObstacleTracker
 
 ORIENTATION_RAD = {o: -math.radians(45.0 * o) for o in range(8)}
 """MAV_SENSOR_ORIENTATION yaw steps (45 deg clockwise each) as body angles (counter-clockwise positive)."""
@@ -38,7 +51,8 @@ class ObstacleMemory:
         self.params = params
         self._length_m = footprint_length_m if callable(footprint_length_m) else (lambda: footprint_length_m)
         self._width_m = footprint_width_m if callable(footprint_width_m) else (lambda: footprint_width_m)
-        self._points = np.empty((0, 3))  # rows: time_s, east_m, north_m
+        self._points = np.empty((0, 4))  # rows: time_s, east_m, north_m, track ident
+        self.tracker = ObstacleTracker(params)
 
     def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
         """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
@@ -53,22 +67,42 @@ class ObstacleMemory:
         if not math.isfinite(range_m) or range_m < 0.0:
             return
         e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
-        point = (time_s, e + range_m * math.cos(axis), n + range_m * math.sin(axis))
-        self._points = np.vstack((self._points, point))
+        east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
+        ident = self.tracker.add(time_s, east, north) if self.params.horizon_s > 0.0 else 0  # no cost when off
+        self._points = np.vstack((self._points, (time_s, east, north, ident)))
 
-    def ranges(self, time_s: float, east_m: float, north_m: float, heading_rad: float, latest_m: dict[int, float]) -> dict[int, float]:
-        """``latest_m`` with each sensor's range shortened to the nearest remembered echo in its sector."""
+    def ranges(self, time_s: float, east_m: float, north_m: float, heading_rad: float, latest_m: dict[int, float],
+               speed_mps: float = 0.0) -> dict[int, float]:  # fmt: skip
+        """``latest_m`` with each sensor's range shortened to the nearest remembered echo in its
+        sector (and predicted path, see the module docstring; ``speed_mps`` is the rover's
+        forward speed, which tells echoes sliding along a surface beside it from moving obstacles)."""
         self._points = self._points[self._points[:, 0] > time_s - self.params.memory_s]
-        if not len(self._points):
+        points = self._points[:, 1:3]
+        if self.params.horizon_s > 0.0:
+            points = self._predicted(time_s, (speed_mps * math.cos(heading_rad), speed_mps * math.sin(heading_rad)))
+        if not len(points):
             return dict(latest_m)
         out = {}
         sector_cos = math.cos(math.radians(self.params.sector_half_deg))
         for orientation, range_m in latest_m.items():
             e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
-            d_east, d_north = self._points[:, 1] - e, self._points[:, 2] - n
+            d_east, d_north = points[:, 0] - e, points[:, 1] - n
             distance = np.hypot(d_east, d_north)
             along = d_east * math.cos(axis) + d_north * math.sin(axis)
             inside = along >= sector_cos * distance  # within sector_half_deg of the axis
             nearest = float(distance[inside].min()) if inside.any() else math.inf
             out[orientation] = min(range_m, nearest) if range_m is not None and not math.isnan(range_m) else range_m
         return out
+
+    def _predicted(self, time_s: float, rover_velocity_en: tuple[float, float]) -> np.ndarray:
+        """(east, north) rows: remembered echoes, those of moving tracks replaced by their
+        predicted paths over the horizon (see the module docstring)."""
+        moving = self.tracker.moving(time_s, rover_velocity_en)
+        if not moving:
+            return self._points[:, 1:3]
+        p = self.params
+        keep = ~np.isin(self._points[:, 3], [t.ident for t in moving])
+        tau = np.arange(0.0, p.horizon_s + 1e-9, p.prediction_step_s)
+        paths = [np.column_stack((e + t.v_east_mps * tau, n + t.v_north_mps * tau))
+                 for t in moving for e, n in [t.position_at(time_s)]]  # fmt: skip
+        return np.vstack([self._points[keep, 1:3], *paths])

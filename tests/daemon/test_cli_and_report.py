@@ -13,7 +13,9 @@ import pytest
 from rover_ctl.cli import main
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.app.report import ReportError, write_report
-from rover_ctl.app.sim import ROVER_CTL
+from rover_ctl.app.sim import BUDGET_FLOOR_S, BUDGET_MARGIN, ROVER_CTL, SimOptions, SimRun, time_budget_s
+from rover_ctl.mission.files import save_mission
+from rover_ctl.mission.model import Cmd, Home, Mission, MissionItem
 from support import free_port
 
 HOME = (-35.363261, 149.165230, 584.0)
@@ -161,3 +163,22 @@ def test_sigterm_while_waiting_for_the_vehicle_exits_0(tmp_path):
         finally:
             if proc.poll() is None:
                 proc.kill()
+
+
+def test_sim_time_budget_scales_with_the_mission():
+    assert time_budget_s(0.0) == BUDGET_FLOOR_S
+    assert time_budget_s(10.0) == BUDGET_FLOOR_S
+    assert time_budget_s(692.0) == pytest.approx(BUDGET_MARGIN * 692.0)  # an 830 m mission at 1.2 m/s
+    assert time_budget_s(692.0) > 700.0 + 300.0  # what it needs, with room for detours
+
+
+def test_sim_budget_from_the_mission_and_the_daemon_speed_unless_given(tmp_path):
+    frame = LocalFrame(*HOME)
+    lat, lon = frame.to_geodetic(0.0, 830.0)
+    path = tmp_path / "long.waypoints"
+    save_mission(Mission(items=[MissionItem(Cmd.NAV_WAYPOINT, x=lat, y=lon)], home=Home(*HOME)), path)
+    budget = SimRun(SimOptions(mission=path, out=tmp_path / "a")).budget_s
+    assert budget == pytest.approx(BUDGET_MARGIN * 830.0 / 1.2, rel=1e-3)  # executor.cruise_speed_mps default
+    slower = SimRun(SimOptions(mission=path, out=tmp_path / "b", config_overrides=["executor.cruise_speed_mps=0.6"])).budget_s
+    assert slower == pytest.approx(2.0 * budget, rel=1e-3)
+    assert SimRun(SimOptions(mission=path, out=tmp_path / "c", timeout_s=50.0)).budget_s == 50.0

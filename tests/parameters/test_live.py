@@ -181,6 +181,27 @@ def ex_proximity(d: Daemon) -> list:
     return trace
 
 
+def predicting(d: Daemon) -> None:
+    """Prediction on, unless the parameter under test set its horizon: the tracker's parameters
+    change what the navigator sees only then."""
+    if d.config.proximity.horizon_s == 0.0:
+        d.config.proximity.horizon_s = 2.0
+
+
+def ex_tracks(d: Daemon) -> list:
+    memory, trace = d.autopilot.proximity, []
+    for k in range(60):  # a pedestrian crossing 2 m ahead at 0.8 m/s, the front beam following it
+        t = k * 0.1
+        east, north = 2.0, -3.0 + 0.8 * t
+        memory.add(t, 0.0, 0.0, math.atan2(north, east), 0, math.hypot(east, north))
+        if k % 7 == 0:
+            memory.add(t, 0.0, 0.0, 0.0, 6, 1.0 + 0.1 * k)  # a stray echo on the left now and then
+        if k % 5 == 0:
+            trace.append(sorted(memory.ranges(t, 0.0, 0.0, 0.0, {o: 4.0 for o in (0, 1, 2, 6, 7)}).items()))
+            trace.append([(tr.ident, tr.hits, round(tr.v_east_mps, 9), round(tr.v_north_mps, 9)) for tr in memory.tracker.confirmed(t)])
+    return trace
+
+
 def mission_for_planner(d: Daemon) -> None:
     lat, lon = latlon(15.0, 0.5)
     circle = MissionItem(Cmd.NAV_FENCE_CIRCLE_EXCLUSION, frame=0, param1=3.0, x=lat, y=lon)
@@ -327,6 +348,7 @@ EXERCISES = {
     "navigator": (no_mission, ex_navigator, ("navigator.", "robot.max_wheel_rpm", "robot.wheel_radius_m")),
     "wheels": (no_mission, ex_wheels, ("wheel_control.", "robot.wheel_radius_m")),
     "proximity": (no_mission, ex_proximity, ("proximity.", "robot.footprint_length_m", "robot.footprint_width_m")),
+    "tracks": (predicting, ex_tracks, ("proximity.",)),
     "planner": (mission_for_planner, ex_planner, ("planner.", "robot.footprint_width_m")),
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
