@@ -106,9 +106,9 @@ def _startup() -> dict:
         subprocess.run([*ROVER_CTL, "--help"], check=True, stdout=subprocess.DEVNULL, env=env)
         helps.append(time.perf_counter() - started)
     code = ("import sys, time; t = time.perf_counter(); import rover_ctl.app.daemon; "
-            "t = time.perf_counter() - t; import json; from bench.rss import peak_rss_kb; "
-            f"print(json.dumps({{'import_s': t, 'max_rss_kb': peak_rss_kb(), "
-            f"'modules': len(sys.modules), 'heavy': [m for m in {HEAVY!r} if m in sys.modules]}}))")  # fmt: skip
+            f"t = time.perf_counter() - t; n = len(sys.modules); heavy = [m for m in {HEAVY!r} if m in sys.modules]; "
+            "import json; from bench.rss import peak_rss_kb; "
+            "print(json.dumps({'import_s': t, 'max_rss_kb': peak_rss_kb(), 'modules': n, 'heavy': heavy}))")  # fmt: skip
     imports = [json.loads(subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True, env=env).stdout)
                for _ in range(STARTUP_REPEATS)]  # fmt: skip
     bare = [json.loads(subprocess.run([sys.executable, "-c", "from bench.rss import peak_rss_kb; print(peak_rss_kb())"],
