@@ -39,6 +39,10 @@ HEAVY = ("scipy", "scipy.stats", "scipy.optimize", "scipy.ndimage", "scipy.linal
          "networkx", "shapely", "pyproj", "matplotlib", "rich", "bench")  # fmt: skip
 """Packages whose presence after the daemon's import is reported."""
 STARTUP_REPEATS = 5
+BASELINE = Path(__file__).resolve().parent / "baselines" / "loop_before.json"
+"""This benchmark's result on the tree before issue 17's changes (BASELINE_COMMIT with this bench's
+files copied in), run just before or after the current figures; shown beside them."""
+BASELINE_COMMIT = "8293069"
 
 
 class _Probed:
@@ -129,7 +133,8 @@ def _summary(record: dict, call_cost_s: float) -> dict:
         "steps": record["steps"], "wall_s": record["wall_s"], "steps_per_s": record["steps"] / record["wall_s"],
         "cpu_share_pct": 100 * record["process_cpu_s"] / record["wall_s"],
         "cpu_per_step_ms": 1e3 * record["process_cpu_s"] / steps, "parts_ms": per_step_ms,
-        "probe_cost_per_step_ms": 1e3 * call_cost_s * record["timed_calls"] / steps,
+        "probe_cost_per_step_ms": 1e3 * call_cost_s * sum(record["calls"].values()) / steps,
+        "turns_per_step": record["calls"]["loop_overhead"] / steps,
         "peak_rss_mb": record["max_rss_kb"] / 1024, "waypoints_reached": record["waypoints_reached"],
     }  # fmt: skip
 
@@ -141,7 +146,7 @@ def _table(runs: dict[str, dict], startup: dict) -> str:
         lines.append(f"| {part.replace('_', ' ')} | " + " | ".join(f"{runs[k]['parts_ms'][part]:.3f}" for k in labels) + " |")
     rows = [("**whole process, per step**", "cpu_per_step_ms", "**{:.3f}**"), ("of which the probe's own timing (estimate)", "probe_cost_per_step_ms", "{:.3f}"),
             ("**CPU share of one core**", "cpu_share_pct", "**{:.2f}%**"), ("**peak RSS**", "peak_rss_mb", "**{:.0f} MB**"),
-            ("control steps per wall second", "steps_per_s", "{:.1f}"), ("control steps in the window", "steps", "{}"),
+            ("control steps per wall second", "steps_per_s", "{:.1f}"), ("loop turns per control step", "turns_per_step", "{:.2f}"), ("control steps in the window", "steps", "{}"),
             ("waypoints reached in the window", "waypoints_reached", "{}")]  # fmt: skip
     for label, key, fmt in rows:
         lines.append(f"| {label} | " + " | ".join(fmt.format(runs[k][key]) for k in labels) + " |")
@@ -155,6 +160,30 @@ def _table(runs: dict[str, dict], startup: dict) -> str:
         f"| modules loaded by it | {startup['modules']} |",
         f"| heavy packages among them | {', '.join(startup['heavy_loaded']) or 'none'} |",
     ]
+    return "\n".join(lines)
+
+
+def _compare(runs: dict[str, dict], startup: dict) -> str:
+    """Before (BASELINE) and now, side by side."""
+    if not BASELINE.exists():
+        return ""
+    before = json.loads(BASELINE.read_text())
+    lines = [f"Before and after issue 17's changes: before is commit {BASELINE_COMMIT} measured by this same benchmark "
+             f"on {before.get('date')} ({before.get('window_s'):g} s window), after is the table above.", "",
+             "| figure | before | after |", "|---|---|---|"]  # fmt: skip
+    for label in runs:
+        old = before["runs"].get(label)
+        if old is None:
+            continue
+        for name, key, fmt in (("CPU per control step", "cpu_per_step_ms", "{:.2f} ms"), ("estimator per step", None, "{:.3f} ms"),
+                               ("CPU share of one core", "cpu_share_pct", "{:.1f}%"), ("peak RSS", "peak_rss_mb", "{:.0f} MB")):  # fmt: skip
+            a, b = (old["parts_ms"]["estimator"], runs[label]["parts_ms"]["estimator"]) if key is None else (old[key], runs[label][key])
+            lines.append(f"| {label}: {name} | {fmt.format(a)} | {fmt.format(b)} |")
+    old = before["startup"]
+    lines += [f"| `rover-ctl --help` (median) | {old['help_s']:.3f} s | {startup['help_s']:.3f} s |",
+              f"| `import rover_ctl.app.daemon` (median) | {old['import_s']:.3f} s | {startup['import_s']:.3f} s |",
+              f"| RSS after that import | {old['import_rss_mb']:.0f} MB | {startup['import_rss_mb']:.0f} MB |",
+              f"| modules it loads | {old['modules']} | {startup['modules']} |"]  # fmt: skip
     return "\n".join(lines)
 
 
@@ -183,6 +212,8 @@ def run(quick: bool) -> dict:
         "emulator or firmware, this ground station and other work, so repeated runs differ by some tens of percent).",
         "",
         _table(runs, startup),
+        "",
+        _compare(runs, startup),
     ])  # fmt: skip
     return {"title": "Control loop on a companion computer: CPU per step, share, memory, start-up", "markdown": markdown,
             "window_s": window_s, "timed_call_cost_us": call_cost_s * 1e6, "runs": runs, "startup": startup}  # fmt: skip

@@ -6,7 +6,7 @@ before the command line builds the daemon, each by a timed call charging the pro
 (``time.process_time``) spent inside it, less what nested timed calls took, to one category.
 ``Daemon.turn``'s own remainder is the loop's overhead. SIGUSR1 zeroes the counters (the bench sends
 it when the mission starts); SIGUSR2 writes OUT.json: CPU seconds per category, control steps,
-timed calls, the window's wall and process CPU seconds, and the peak resident memory so far
+timed calls per category (``loop_overhead``'s are loop turns), the window's wall and process CPU seconds, and the peak resident memory so far
 (``peak_rss_kb``).
 """
 
@@ -50,7 +50,7 @@ class Probe:
 
     def reset(self, *_args) -> None:
         self.cpu_s = dict.fromkeys(CATEGORIES, 0.0)
-        self.calls = 0
+        self.calls = dict.fromkeys(CATEGORIES, 0)
         self.steps_at_start = self.daemon.steps if self.daemon else 0
         self.window_wall = time.monotonic()
         self.window_cpu = time.process_time()
@@ -68,7 +68,7 @@ class Probe:
         def timed(*args, **kwargs):
             self._charge()
             self.stack.append(category)
-            self.calls += 1
+            self.calls[category] += 1
             try:
                 return original(*args, **kwargs)
             finally:
@@ -81,7 +81,7 @@ class Probe:
         wall_s = time.monotonic() - self.window_wall
         cpu_s = time.process_time() - self.window_cpu
         steps = (self.daemon.steps if self.daemon else 0) - self.steps_at_start
-        record = {"cpu_s": self.cpu_s, "steps": steps, "timed_calls": self.calls, "wall_s": wall_s, "process_cpu_s": cpu_s,
+        record = {"cpu_s": self.cpu_s, "steps": steps, "calls": self.calls, "wall_s": wall_s, "process_cpu_s": cpu_s,
                   "max_rss_kb": peak_rss_kb()}  # fmt: skip
         tmp = self.out.with_suffix(".tmp")
         tmp.write_text(json.dumps(record))

@@ -520,7 +520,7 @@ class Daemon:
         now = time.monotonic()
         if self.link.last_gps_msg is not None:
             self.gcs.send_gps_raw_int(now, self.link.last_gps_msg)
-        if self.battery is not None:
+        if self.battery is not None and self.gcs.sys_status_due(now):
             present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.autopilot.mission.fence else 0)
             reasons = self.autopilot.state().failsafes
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)

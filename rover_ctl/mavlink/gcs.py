@@ -316,6 +316,10 @@ class GcsLink:
     def pose_due(self, now_s: float) -> bool:
         return self.telemetry.pose_due(now_s)
 
+    def sys_status_due(self, now_s: float) -> bool:
+        """Whether SYS_STATUS would go out now (its fields are worth computing)."""
+        return self.telemetry.rates.pending(mav.MAVLINK_MSG_ID_SYS_STATUS, now_s)
+
     def send_global_position_int(self, now_s: float, *args) -> bool:
         return self.telemetry.send_global_position_int(now_s, *args)
 
