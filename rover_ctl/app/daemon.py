@@ -13,7 +13,8 @@ Each turn of the loop
 3. polls the GCS link (``rover_ctl.mavlink.gcs.GcsLink``), for which the daemon is the
    ``AutopilotHandlers``: each request is the autopilot's decision, its events applied at once (a
    refusal's STATUSTEXT goes out before the COMMAND_ACK);
-4. sends telemetry to the GCS and blocks on both sockets for at most ``daemon.idle_wait_s``.
+4. sends telemetry to the GCS and blocks on both sockets for at most ``daemon.idle_wait_s``
+   (unless the vehicle link holds messages it has read but not handed over yet).
 
 Every decision is the autopilot's (``rover_ctl.autopilot``); the vehicle itself is kept in MANUAL
 mode and steered with RC overrides.
@@ -300,7 +301,9 @@ class Daemon:
         self.gcs.poll(time.monotonic())
         self._note_gcs_heartbeat()
         self._send_telemetry()
-        if not items:
+        # Sleep until the next message even after a busy turn (a turn that only finds the sockets
+        # empty costs as much as a short one), unless messages already read are waiting.
+        if not link.backlog:
             fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
             select.select(fds, [], [], self.settings.idle_wait_s)
 
