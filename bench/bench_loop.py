@@ -163,6 +163,19 @@ def _table(runs: dict[str, dict], startup: dict) -> str:
     return "\n".join(lines)
 
 
+GOALS = (("CPU share <= 2% of one core", "cpu_share_pct", 2.0), ("peak RSS <= 120 MB", "peak_rss_mb", 120.0))
+"""Issue 17's targets for the daemon driving the bundled mission in real time."""
+HELP_GOAL_S = 0.3
+
+
+def _goals(runs: dict[str, dict], startup: dict) -> str:
+    lines = ["| issue 17 goal | met |", "|---|---|"]
+    for label, key, limit in GOALS:
+        lines.append(f"| {label} | " + ", ".join(f"{k}: {'yes' if r[key] <= limit else 'no'} ({r[key]:.1f})" for k, r in runs.items()) + " |")
+    lines.append(f"| `rover-ctl --help` < {HELP_GOAL_S:g} s | {'yes' if startup['help_s'] < HELP_GOAL_S else 'no'} ({startup['help_s']:.3f} s) |")
+    return "\n".join(lines)
+
+
 def _compare(runs: dict[str, dict], startup: dict) -> str:
     """Before (BASELINE) and now, side by side."""
     if not BASELINE.exists():
@@ -198,8 +211,16 @@ def run(quick: bool) -> dict:
             fw = FirmwareOptions(mission=MISSION, out=Path(tmp) / "fw", lockstep=False, speedup=1, timeout_s=400,
                                  rangefinders="six", config_overrides=list(WHEELS))  # fmt: skip
             runs["ArduPilot firmware 1x"] = _summary(_drive(_ProbedFirmware, fw, window_s), call_cost_s)
-    startup = _startup()
-    markdown = "\n".join([
+    result = {"title": "Control loop on a companion computer: CPU per step, share, memory, start-up", "window_s": window_s,
+              "timed_call_cost_us": call_cost_s * 1e6, "runs": runs, "startup": _startup()}  # fmt: skip
+    result["markdown"] = markdown(result)
+    return result
+
+
+def markdown(result: dict) -> str:
+    """The section of docs/BENCHMARKS.md for ``result`` (and the baseline, when there is one)."""
+    window_s, runs, startup = result["window_s"], result["runs"], result["startup"]
+    return "\n".join([
         f"`missions/cmac_loop.waypoints` in real time, six rangefinders, this process as the ground station; the first "
         f"{window_s:g} wall seconds after MISSION_START (the whole mission takes about 150 s). The daemon is "
         "`rover-ctl run` under `bench/loop_probe.py`, which times its methods from outside: each part is the process "
@@ -213,7 +234,7 @@ def run(quick: bool) -> dict:
         "",
         _table(runs, startup),
         "",
+        _goals(runs, startup),
+        "",
         _compare(runs, startup),
     ])  # fmt: skip
-    return {"title": "Control loop on a companion computer: CPU per step, share, memory, start-up", "markdown": markdown,
-            "window_s": window_s, "timed_call_cost_us": call_cost_s * 1e6, "runs": runs, "startup": startup}  # fmt: skip
