@@ -31,3 +31,11 @@ def test_the_help_lists_the_shipped_rule_bases():
     from rover_ctl.fuzzy import shipped
 
     assert shipped_names() == shipped() and "paper" in shipped()
+
+
+def test_the_vehicle_link_speaks_mavlink_2_whatever_imported_mavutil_first():
+    """gcs.py imports mavutil before anything sets MAVLINK20 (its default dialect is then MAVLink 1's
+    "all", without e.g. ESC_TELEMETRY_1_TO_4): the vehicle link must not take that as its dialect."""
+    code = "import rover_ctl.mavlink.gcs, rover_ctl.mavlink.vehicle as v; print(v.mavlink.__name__)"
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True, timeout=120).stdout
+    assert out.strip() == "pymavlink.dialects.v20.ardupilotmega"

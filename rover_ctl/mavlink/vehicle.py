@@ -49,8 +49,9 @@ from rover_ctl.config import LinkParams  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from rover_ctl.mavlink import budget  # noqa: E402
 from rover_ctl.mavlink.link_health import LinkHealth  # noqa: E402
-
-mavlink = mavutil.mavlink
+# The dialect module itself, not mavutil.mavlink: that is whichever dialect was current when this
+# module was imported (MAVLink 1's "all" if gcs.py, say, imported mavutil before MAVLINK20 was set).
+from rover_ctl.vocabulary import mav as mavlink  # noqa: E402
 
 UINT16_MAX = 65535
 RC_RELEASE = 0
