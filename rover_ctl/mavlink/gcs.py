@@ -45,9 +45,11 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+import os
 from typing import Protocol
 
-from pymavlink import mavutil
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 
 from rover_ctl.config import Config, GcsParams
 from rover_ctl.mavlink import commands, params
