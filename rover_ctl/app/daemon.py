@@ -13,7 +13,8 @@ Each turn of the loop
 3. polls the GCS link (``rover_ctl.mavlink.gcs.GcsLink``), for which the daemon is the
    ``AutopilotHandlers``: each request is the autopilot's decision, its events applied at once (a
    refusal's STATUSTEXT goes out before the COMMAND_ACK);
-4. sends telemetry to the GCS and blocks on both sockets for at most ``daemon.idle_wait_s``.
+4. sends telemetry to the GCS and blocks on both sockets for at most ``daemon.idle_wait_s``
+   (unless the vehicle link holds messages it has read but not handed over yet).
 
 Every decision is the autopilot's (``rover_ctl.autopilot``); the vehicle itself is kept in MANUAL
 mode and steered with RC overrides.
@@ -318,7 +319,9 @@ class Daemon:
         self.gcs.poll(time.monotonic())
         self._note_gcs_heartbeat()
         self._send_telemetry()
-        if not items:
+        # Sleep until the next message even after a busy turn (a turn that only finds the sockets
+        # empty costs as much as a short one), unless messages already read are waiting.
+        if not link.backlog:
             fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
             select.select(fds, [], [], self.settings.idle_wait_s)
 
@@ -540,7 +543,7 @@ class Daemon:
         now = time.monotonic()
         if self.link.last_gps_msg is not None:
             self.gcs.send_gps_raw_int(now, self.link.last_gps_msg)
-        if self.battery is not None:
+        if self.battery is not None and self.gcs.sys_status_due(now):
             present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.autopilot.mission.fence else 0)
             reasons = self.autopilot.state().failsafes
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)

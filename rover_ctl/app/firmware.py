@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from pymavlink import mavutil
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.app.sim import STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun

@@ -15,19 +15,30 @@ import csv
 import io
 import math
 import sys
+import importlib.util
 from collections import Counter
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from rover_ctl.cli import UserError
-from rover_ctl.fuzzy import RuleBase, RuleBaseError, load_rulebase, shipped
+
+if TYPE_CHECKING:  # numpy and the engine load when a subcommand runs, not for --help
+    import numpy as np
+
+    from rover_ctl.fuzzy import RuleBase
+
+
+def shipped_names() -> list[str]:
+    """``rover_ctl.fuzzy.shipped()`` without importing the engine (and numpy) for the help text:
+    the rule base files in the package's folder, found without running its ``__init__``."""
+    folder = Path(importlib.util.find_spec("rover_ctl.fuzzy").submodule_search_locations[0]) / "rulebases"
+    return sorted(p.stem for p in folder.glob("*.toml"))
 
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser("fuzzy", help="evaluate or inspect fuzzy rule bases")
     sub = parser.add_subparsers(dest="fuzzy_command", metavar="ACTION", required=True)
-    names = ", ".join(shipped())
+    names = ", ".join(shipped_names())
 
     evaluate = sub.add_parser("eval", help="evaluate a rule base on the rows of a CSV")
     evaluate.add_argument("--rulebase", required=True, metavar="NAME|FILE", help=f"shipped ({names}) or a .toml or .fcl file")
@@ -43,6 +54,8 @@ def add_parser(subparsers) -> None:
 
 
 def _load(name: str) -> RuleBase:
+    from rover_ctl.fuzzy import RuleBaseError, load_rulebase
+
     try:
         return load_rulebase(name)
     except RuleBaseError as exc:
@@ -50,6 +63,8 @@ def _load(name: str) -> RuleBase:
 
 
 def _read_rows(args: argparse.Namespace, rb: RuleBase) -> tuple[list[str], list[list[str]], dict[str, np.ndarray]]:
+    import numpy as np
+
     where = args.input or "<stdin>"
     try:
         text = Path(args.input).read_text(encoding="utf-8") if args.input else sys.stdin.read()
@@ -78,6 +93,8 @@ def _read_rows(args: argparse.Namespace, rb: RuleBase) -> tuple[list[str], list[
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
+    import numpy as np
+
     rb = _load(args.rulebase)
     header, rows, columns = _read_rows(args, rb)
     outputs = rb.evaluate(columns) if rows else {n: np.empty(0) for n in rb.output_names}
@@ -128,6 +145,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 def _plot(rb: RuleBase, path: str) -> None:
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

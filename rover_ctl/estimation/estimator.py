@@ -76,9 +76,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
 from rover_ctl.config import EstimatorParams
+from rover_ctl.estimation.ekf import Ekf, solve_small
 from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
 from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 
@@ -141,16 +141,13 @@ class _Disagreement:
         return self.drifting_since_s is None
 
 
+def _largest_eigenvalue_2x2(a: float, b: float, d: float) -> float:
+    """Of the symmetric matrix [[a, b], [b, d]]."""
+    return float(0.5 * (a + d) + math.hypot(0.5 * (a - d), b))
+
+
 def _mahalanobis2(y: np.ndarray, cov: np.ndarray) -> float:
-    return float((y.T @ np.linalg.solve(cov, y))[0, 0])
-
-
-class _RoverEkf(ExtendedKalmanFilter):
-    """filterpy's EKF with the rover's nonlinear motion model as its state prediction."""
-
-    def predict_x(self, u=0):
-        dt_s, gyro_radps = u
-        self.x, self.F = motion_model(self.x, dt_s, gyro_radps)
+    return float((y.T @ solve_small(cov, y))[0, 0])
 
 
 def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndarray, np.ndarray]:
@@ -175,17 +172,17 @@ def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndar
     return out, jac
 
 
-def _linear(*rows: tuple[int, ...]):
-    """A linear measurement, each row the sum of some state components: H and h(x) = H x."""
+def _linear(*rows: tuple[int, ...]) -> np.ndarray:
+    """A linear measurement's H (h(x) = H x), each row the sum of some state components."""
     h = np.zeros((len(rows), _DIM))
     for i, components in enumerate(rows):
         h[i, list(components)] = 1.0
-    return (lambda x: h), (lambda x: h @ x)
+    return h
 
 
-_H_POS, _HX_POS = _linear((E,), (N,))
-_H_PSI, _HX_PSI = _linear((PSI,))
-_H_COMPASS, _HX_COMPASS = _linear((PSI, COMPASS))
+_H_POS = _linear((E,), (N,))
+_H_COMPASS = _linear((PSI, COMPASS))
+_H_PSI_V = _linear((PSI,), (V,))
 
 
 def _h_wheels(x: np.ndarray) -> np.ndarray:
@@ -194,12 +191,6 @@ def _h_wheels(x: np.ndarray) -> np.ndarray:
     h[0, V] = x[SCALE, 0]
     h[0, SCALE] = x[V, 0]
     return h
-
-
-def _hx_wheels(x: np.ndarray) -> np.ndarray:
-    return np.array([[x[SCALE, 0] * x[V, 0]]])
-
-_H_PSI_V, _HX_PSI_V = _linear((PSI,), (V,))
 
 
 def _angle_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
@@ -232,7 +223,7 @@ class PoseEstimator:
 
     def _clear(self) -> None:
         """Forget everything: the state before the first reading."""
-        self._kf = _RoverEkf(dim_x=_DIM, dim_z=2)
+        self._kf = Ekf(_DIM)
         self._time_s = -math.inf
         self._initialised = False
         self._gyro_radps = 0.0
@@ -260,7 +251,7 @@ class PoseEstimator:
             return Pose(self._time_s, nan, nan, nan, nan, nan, np.full((3, 3), nan), False, False, nan, nan)
         x, p = self._kf.x[:, 0], self._kf.P
         cov = p[:3, :3].copy()
-        position_sigma_m = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        position_sigma_m = math.sqrt(max(_largest_eigenvalue_2x2(cov[0, 0], cov[0, 1], cov[1, 1]), 0.0))
         heading_sigma_rad = math.sqrt(max(float(cov[2, 2]), 0.0))
         healthy = (
             position_sigma_m <= self.params.health_max_position_sigma_m
@@ -302,7 +293,8 @@ class PoseEstimator:
         if not self._advance(r.time_s):
             return
         sigma = self.params.wheel_speed_sigma_mps + self.params.wheel_slip_fraction * abs(speed_mps)
-        self._kf.update(np.array([[speed_mps]]), _h_wheels, _hx_wheels, R=np.array([[sigma * sigma]]))
+        x = self._kf.x
+        self._kf.update(np.array([[speed_mps]]), _h_wheels(x), np.array([[x[SCALE, 0] * x[V, 0]]]), np.array([[sigma * sigma]]))
 
     def on_attitude(self, r: Attitude) -> None:
         """Gyro rate for the prediction from now on, and the compass heading as a measurement."""
@@ -325,9 +317,7 @@ class PoseEstimator:
         lag_s = self._time_s - r.time_s
         z = wrap_pi(heading_rad + (self._gyro_radps - float(self._kf.x[BIAS, 0])) * lag_s)
         sigma = self.params.compass_sigma_rad
-        self._kf.update(
-            np.array([[z]]), _H_COMPASS, _HX_COMPASS, R=np.array([[sigma * sigma]]), residual=_angle_residual
-        )
+        self._kf.update(np.array([[z]]), _H_COMPASS, _H_COMPASS @ self._kf.x, np.array([[sigma * sigma]]), _angle_residual)
         self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
 
     def on_gps(self, r: GpsFix) -> GpsVerdict:
@@ -354,7 +344,7 @@ class PoseEstimator:
         lag_s = self._time_s - r.time_s
         z = np.array([[east_m + x[V] * lag_s * math.cos(x[PSI])], [north_m + x[V] * lag_s * math.sin(x[PSI])]])
         r_cov = np.eye(2) * sigma_m * sigma_m
-        innovation = z - _HX_POS(self._kf.x)
+        innovation = z - _H_POS @ self._kf.x
         s_cov = self._kf.P[:2, :2] + r_cov
         distance2 = _mahalanobis2(innovation, s_cov)
         glitch = self._disagreement
@@ -362,7 +352,7 @@ class PoseEstimator:
             glitch is not None and glitch.is_jump and _mahalanobis2(innovation - glitch.offset, s_cov) < distance2
         ):
             tracking = self._time_s - self._gps_fused_s <= self.params.gps_timeout_s
-            self._kf.update(z, _H_POS, _HX_POS, R=r_cov)
+            self._kf.update(z, _H_POS, _H_POS @ self._kf.x, r_cov)
             self._disagreement = None
             alpha = 1.0 - math.exp(-(self._time_s - self._gps_fused_s) / self.params.glitch_innovation_tau_s)
             self._innovation_mean = self._innovation_mean + alpha * (innovation - self._innovation_mean) if tracking else innovation
@@ -422,10 +412,11 @@ class PoseEstimator:
         z = np.array([[wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - x[BIAS]) * lag_s)], [speed_mps]])
         course_sigma = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps)
         r_cov = np.diag([course_sigma**2, p.gps_velocity_sigma_mps**2])
-        innovation = _heading_first_residual(z, _HX_PSI_V(self._kf.x))
+        hx = _H_PSI_V @ self._kf.x
+        innovation = _heading_first_residual(z, hx)
         if _mahalanobis2(innovation, self._kf.P[np.ix_((PSI, V), (PSI, V))] + r_cov) > p.gate_sigma**2:
             return  # a velocity glitch, or crabbing (a slide) the model has no state for
-        self._kf.update(z, _H_PSI_V, _HX_PSI_V, R=r_cov, residual=_heading_first_residual)
+        self._kf.update(z, _H_PSI_V, hx, r_cov, _heading_first_residual)
         self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
 
     def _advance(self, time_s: float) -> bool:
@@ -436,7 +427,7 @@ class PoseEstimator:
         if dt_s <= 0.0:
             return -dt_s <= self.params.max_lag_s
         p = self.params
-        self._kf.Q = np.diag(
+        q = np.diag(
             [
                 p.lateral_slip_per_sqrt_s**2,
                 p.lateral_slip_per_sqrt_s**2,
@@ -447,7 +438,8 @@ class PoseEstimator:
                 p.wheel_scale_walk_per_sqrt_s**2,
             ]
         ) * dt_s
-        self._kf.predict(u=(dt_s, self._rate_input_radps(time_s)))
+        x, jacobian = motion_model(self._kf.x, dt_s, self._rate_input_radps(time_s))
+        self._kf.predict(x, jacobian, q)
         self._time_s = time_s
         return True
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.integrate import trapezoid
 
 from rover_ctl.fuzzy.membership import Variable
 
@@ -51,9 +50,15 @@ def _sampled(mu: np.ndarray, output: Variable, resolution: int, reduce: Callable
     return result
 
 
+def _trapezoid(y: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """The trapezoid rule along each row (scipy.integrate.trapezoid's formula, without importing
+    scipy.integrate, which loads scipy.optimize, into the daemon)."""
+    return ((y[:, 1:] + y[:, :-1]) * np.diff(xs)).sum(axis=1) / 2.0
+
+
 def _centre_of_gravity(aggregate: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    area = trapezoid(aggregate, xs, axis=1)
-    moment = trapezoid(aggregate * xs, xs, axis=1)
+    area = _trapezoid(aggregate, xs)
+    moment = _trapezoid(aggregate * xs, xs)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(area > 0.0, moment / area, np.nan)
 

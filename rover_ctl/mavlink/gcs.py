@@ -45,9 +45,11 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+import os
 from typing import Protocol
 
-from pymavlink import mavutil
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 
 from rover_ctl.config import Config, GcsParams
 from rover_ctl.mavlink import commands, params
@@ -315,6 +317,10 @@ class GcsLink:
 
     def pose_due(self, now_s: float) -> bool:
         return self.telemetry.pose_due(now_s)
+
+    def sys_status_due(self, now_s: float) -> bool:
+        """Whether SYS_STATUS would go out now (its fields are worth computing)."""
+        return self.telemetry.rates.pending(mav.MAVLINK_MSG_ID_SYS_STATUS, now_s)
 
     def send_global_position_int(self, now_s: float, *args) -> bool:
         return self.telemetry.send_global_position_int(now_s, *args)

@@ -32,11 +32,13 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from pymavlink import mavutil
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 
 from rover_ctl.config import GcsParams
 from rover_ctl.vocabulary import mav

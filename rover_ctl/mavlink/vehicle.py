@@ -49,8 +49,9 @@ from rover_ctl.config import LinkParams  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from rover_ctl.mavlink import budget  # noqa: E402
 from rover_ctl.mavlink.link_health import LinkHealth  # noqa: E402
-
-mavlink = mavutil.mavlink
+# The dialect module itself, not mavutil.mavlink: that is whichever dialect was current when this
+# module was imported (MAVLink 1's "all" if gcs.py, say, imported mavutil before MAVLINK20 was set).
+from rover_ctl.vocabulary import mav as mavlink  # noqa: E402
 
 UINT16_MAX = 65535
 RC_RELEASE = 0
@@ -299,6 +300,12 @@ class VehicleLink:
             return
         select.select([fd], [], [], timeout_s)
 
+    @property
+    def backlog(self) -> bool:
+        """Whether messages already read wait for the next ``poll`` (one that stopped at a lockstep
+        marker leaves the rest of its read): the caller must not sleep on the socket then."""
+        return bool(self._held or self._parsed)
+
     def poll(self, max_frames: int = 10_000, stop_at_marker: bool = True) -> list[Any]:
         """Decoded items received so far (non-blocking). Stops after a lockstep marker when
         ``stop_at_marker`` so that a frame's control step sees exactly that frame's data."""
@@ -381,7 +388,11 @@ class VehicleLink:
             chunk = b""
             if msg is None:
                 break
-            conn.post_message(msg)  # pymavlink's bookkeeping and message hooks (the tlog)
+            # Only the message hooks (the tlog), not pymavlink's post_message: its bookkeeping (a
+            # table per source and type with two copies of every DISTANCE_SENSOR for its instance
+            # field, a loss counter) duplicates self.health and nothing reads it.
+            for hook in conn.message_hooks:
+                hook(conn, msg)
             self._parsed.append(msg)
         return True
 

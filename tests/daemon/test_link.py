@@ -18,7 +18,7 @@ from rover_ctl.mavlink.vehicle import (CommandResult, FrameMarker, LinkError, Ve
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from support import free_port  # noqa: E402
 
-mav = mavutil.mavlink
+from rover_ctl.vocabulary import mav  # noqa: E402  (not mavutil.mavlink: MAVLink 1's if another module imported mavutil first)
 
 
 class FakeClock:
