@@ -73,7 +73,7 @@ def run(quick: bool) -> dict:
         "free running at the speed-up shown; the daemon follows its timestamps. Emulator: rover-sitl in lockstep. "
         "Control rate is control steps per second of vehicle time during the mission (target 25 Hz); below it the "
         "daemon could not keep up with the firmware at that speed-up on this machine (2 cores shared with the firmware "
-        "and the ground station); there it limits the speed to 0.1 m per control step (SCHED_STEP_TRVL) and says so, "
+        "and the ground station); there it limits the speed to 0.25 m per control step (SCHED_STEP_TRVL) and says so, "
         "so a slow loop makes a slow mission (budget: 1500 s of the firmware's time at 50x, 400 s otherwise).",
     ])  # fmt: skip
     return {"title": "ArduPilot firmware vs rover-sitl (cmac_loop)", "markdown": markdown, "runs": results}

@@ -3,14 +3,14 @@
 The daemon steps once per ``1 / SCHED_LOOP_RATE`` of vehicle time when it keeps up. Against a
 simulator running many times faster than real time (or on a machine too slow for the loop), the
 steps come further apart in vehicle time: the rover then moves further between two decisions.
-``LoopRate`` measures the rate over a sliding window of vehicle time (the inverse of the median
-step interval, so one gap in the vehicle's data does not count as a slow loop; the vehicle-link
-failsafe owns gaps) and, while it is low:
+``LoopRate`` measures the rate over a sliding window of vehicle time (the inverse of the 90th
+percentile step interval: one gap in the vehicle's data does not count as a slow loop, the
+vehicle-link failsafe owns gaps, but frequent stalls do) and, while it is low:
 
 - says so once (STATUSTEXT warning, and again when the rate recovers), and
 - limits the speed so that the rover moves at most ``daemon.max_step_travel_m`` between two
   control steps: ``speed_limit_mps = max_step_travel_m * rate_hz``. At the nominal 25 Hz and the
-  default 0.1 m that is 2.5 m/s, above any cruise speed, so a loop that keeps up is never limited.
+  default 0.25 m that is 6.25 m/s, above any cruise speed, so a loop that keeps up is never limited.
 
 The target is the control rate, or the odometry's measured rate where the line brings less (the
 loop cannot step faster than new data comes; the link budget and its failsafes own that case).
@@ -27,13 +27,17 @@ from rover_ctl.config import DaemonParams
 
 
 MEDIAN_EVERY = 5
-"""Steps between two computations of the median interval (the rate moves slowly)."""
+"""Steps between two computations of the rate (it moves slowly)."""
+INTERVAL_QUANTILE = 0.9
+"""The rate is 1 / this quantile of the step intervals over the window: a loop that stalls often
+(a starved machine: bursts of steps, then nothing while the last command drives on) reads slow,
+while one gap in the vehicle's data (the link failsafe's business) does not."""
 
 
 @dataclass(frozen=True)
 class LoopRateState:
     rate_hz: float | None
-    """Steps per second of vehicle time (1 / median step interval over the last window); None
+    """Steps per second of vehicle time (1 / 90th percentile step interval over the last window); None
     until a window is full."""
     slow: bool
     speed_limit_mps: float | None
@@ -79,8 +83,8 @@ class LoopRate:
         elif self._rate_hz is None or self._steps % MEDIAN_EVERY == 0:  # a sort per step is more than it needs
             times = list(self._times)
             intervals = sorted(b - a for a, b in zip(times, times[1:]))
-            median_s = intervals[len(intervals) // 2]
-            self._rate_hz = 1.0 / median_s if median_s > 0 else None
+            typical_s = intervals[int(INTERVAL_QUANTILE * (len(intervals) - 1))]
+            self._rate_hz = 1.0 / typical_s if typical_s > 0 else None
         rate_hz = self._rate_hz
         was = self.slow
         if rate_hz is not None:
