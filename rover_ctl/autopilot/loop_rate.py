@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from rover_ctl.config import DaemonParams
 
 
-MEDIAN_EVERY = 5
+RATE_EVERY = 5
 """Steps between two computations of the rate (it moves slowly)."""
 INTERVAL_QUANTILE = 0.9
 """The rate is 1 / this quantile of the step intervals over the window: a loop that stalls often
@@ -80,7 +80,7 @@ class LoopRate:
         self._steps += 1
         if t_s - self._times[0] < p.loop_rate_window_s:
             self._rate_hz = None
-        elif self._rate_hz is None or self._steps % MEDIAN_EVERY == 0:  # a sort per step is more than it needs
+        elif self._rate_hz is None or self._steps % RATE_EVERY == 0:  # a sort per step is more than it needs
             times = list(self._times)
             intervals = sorted(b - a for a, b in zip(times, times[1:]))
             typical_s = intervals[int(INTERVAL_QUANTILE * (len(intervals) - 1))]

@@ -278,9 +278,9 @@ class VehicleLink:
         self.lockstep_source: tuple[int, int] | None = None
         """(system, component) that announced lockstep; its TIMESYNC requests are frame markers."""
         self.probes_answered = 0
+        """TIMESYNC requests answered as plain time sync (ArduPilot's latency probe)."""
         self.readings_dropped = 0
         """Stale sensor readings skipped because newer ones of the same kind came in the same batch."""
-        """TIMESYNC requests answered as plain time sync (ArduPilot's latency probe)."""
 
     # ---- receiving -------------------------------------------------------------------------
 
