@@ -346,15 +346,20 @@ class Planner:
         return None
 
     def _inside_inclusions(self, point_en: EN) -> bool:
-        p = Point(point_en)
-        return all(poly.covers(p) for poly in self._inclusion_polygons) and all(
-            math.dist(point_en, c.center_en) <= c.radius_m for c in self.fence.inclusion_circles
-        )
+        # The shapely Point only when there are polygons: this runs at every control step.
+        if self._inclusion_polygons:
+            p = Point(point_en)
+            if not all(poly.covers(p) for poly in self._inclusion_polygons):
+                return False
+        return all(math.dist(point_en, c.center_en) <= c.radius_m for c in self.fence.inclusion_circles)
 
     @staticmethod
     def _in_any(point_en: EN, polygons: Sequence[Polygon], circles: Iterable[Circle]) -> bool:
-        p = Point(point_en)
-        return any(poly.contains(p) for poly in polygons) or any(math.dist(point_en, c.center_en) < c.radius_m for c in circles)
+        if polygons:
+            p = Point(point_en)
+            if any(poly.contains(p) for poly in polygons):
+                return True
+        return any(math.dist(point_en, c.center_en) < c.radius_m for c in circles)
 
     def _to_free(self, point_en: EN) -> EN | None:
         """``point_en`` if it is in free space, else the nearest point of it (None: none at all)."""
