@@ -202,8 +202,11 @@ class FastParser:
         return m
 
 
-def install(mav: Any) -> FastParser:
-    """Give pymavlink ``MAVLink`` object ``mav`` the fast ``parse_char`` and ``decode``."""
+def install(mav: Any) -> FastParser | None:
+    """Give pymavlink ``MAVLink`` object ``mav`` the fast ``parse_char`` and ``decode``; only a
+    MAVLink 2 dialect's (the parser copied here is that generator's), else ``mav`` keeps its own."""
+    if ".v20." not in type(mav).__module__:
+        return None
     parser = FastParser(mav)
     parser.install()
     return parser

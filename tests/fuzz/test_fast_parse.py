@@ -137,3 +137,10 @@ def test_a_garbled_frame_is_reported_as_pymavlink_reports_it():
         raise AssertionError("a bad CRC was accepted")
     msg = fast.parse_char(good)
     assert msg.get_type() == "ATTITUDE" and msg.yaw == 0.5 and msg.get_srcSystem() == 1
+
+
+def test_a_mavlink1_dialect_parser_is_left_as_it_is():
+    from pymavlink.dialects.v10 import ardupilotmega as mav1
+
+    parser = mav1.MAVLink(None)
+    assert fast_parse.install(parser) is None and "parse_char" not in vars(parser)
