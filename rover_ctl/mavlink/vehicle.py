@@ -12,9 +12,8 @@ It owns one pymavlink connection (serial, udp or tcp connection string) and does
   (``rover_ctl.mavlink.link_health``: rates, bytes, sequence gaps, bad CRCs);
 * decode what arrives into typed items (``rover_ctl.estimation.readings`` for sensors, the small classes
   below for the rest); frames that fail to parse are counted and dropped. Input is read in whole
-  buffers (one system call for everything waiting) and parsed with pymavlink's parser (its
-  ``parse_char`` and ``decode`` replaced by the equivalents of ``rover_ctl.mavlink.fast_parse``):
-  its ``recv_msg`` makes a system call per message (a few per message on TCP), which at 10x-50x
+  buffers (one system call for everything waiting) and parsed with pymavlink's parser: its
+  ``recv_msg`` makes a system call per message (a few per message on TCP), which at 10x-50x
   speed-up was most of the loop's time;
 * send commands: COMMAND_LONG with COMMAND_ACK (asynchronous with retries, or blocking for
   start-up), RC_CHANNELS_OVERRIDE and the lockstep TIMESYNC answers.
@@ -48,7 +47,7 @@ from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
-from rover_ctl.mavlink import budget, fast_parse  # noqa: E402
+from rover_ctl.mavlink import budget  # noqa: E402
 from rover_ctl.mavlink.link_health import LinkHealth  # noqa: E402
 # The dialect module itself, not mavutil.mavlink: that is whichever dialect was current when this
 # module was imported (MAVLink 1's "all" if gcs.py, say, imported mavutil before MAVLINK20 was set).
@@ -232,7 +231,6 @@ class VehicleLink:
             )
         except Exception as exc:  # pymavlink raises bare OSError/SerialException/ValueError
             raise LinkError(f"vehicle link {url!r}: cannot open: {exc}") from None
-        fast_parse.install(self.conn.mav)  # pymavlink's parser, the same frames for less CPU
         if hasattr(self.conn, "reconnect_delay"):
             # A TCP peer that went away is reconnected by pymavlink inside recv/write; one quick
             # attempt each time, never its default sleep-and-retry, which would stall the loop.
