@@ -9,8 +9,15 @@ sees them only with its rangefinders):
 * ``cul_de_sac``: a U of walls open towards the rover on the line of a 30 m leg.
 * ``moving``: a 0.6 m drum crossing the 30 m leg at 0.5 m/s, and one travelling against the rover.
 * ``crossing``: crossing traffic on the two legs of ``open``: 2-5 drums (radius 0.3-0.6 m) at
-  0.3-1.0 m/s, each crossing one leg at right angles from either side, timed (seeded, +-3 s) to
-  reach the leg about when a rover at cruise speed gets there.
+  0.3-1.0 m/s (up to 80% of cruise speed), each crossing one leg at right angles from either side,
+  timed (seeded, +-2 s) to reach the leg when a rover at cruise speed gets there.
+* ``head_on``: 1-2 pedestrians (radius 0.25-0.5 m) walking down a 30 m leg towards the rover at
+  0.3-1.0 m/s, starting 18-28 m out within 0.5 m of the line.
+* ``overtaking``: one pedestrian walking up the leg ahead of the rover at 0.3-0.6 m/s, starting
+  4-8 m out within 0.4 m of the line: the rover has to pass it.
+
+The moving obstacles of ``crossing``, ``head_on`` and ``overtaking`` start moving when the rover
+arms (world file ``"start": "armed"``), so the encounter does not depend on how long the upload took.
 
 Variants: the rule bases ``paper`` and ``default``, and ``default+predict``: the default rule base
 with obstacle tracks and prediction on (``proximity.horizon_s`` = ``PREDICT_HORIZON_S``).
@@ -54,6 +61,11 @@ STOPPED_SPEED_MPS = 0.05
 """A collision with the rover slower than this (truth) was one it was struck in while stopped."""
 CRUISE_MPS = 1.2
 """executor.cruise_speed_mps: the crossing traffic is timed for it."""
+START_LAG_S = 1.5
+"""Seconds from arming to the rover at cruise speed on its first leg (mission start, first plan,
+acceleration), measured on the open scenario."""
+ARRIVAL_JITTER_S = 2.0
+"""Crossing traffic reaches the leg within this many seconds of the rover (seeded)."""
 WORKERS = 2
 """Simulations run side by side (each is two processes; the machine has 2 cores)."""
 ACCEPTANCE_RADIUS_M = 0.5
@@ -85,6 +97,16 @@ def _wall(a: EN, b: EN, thickness_m: float = 0.3) -> list[EN]:
     return [(ax + nx, ay + ny), (bx + nx, by + ny), (bx - nx, by - ny), (ax - nx, ay - ny)]
 
 
+def _arrival_s(distance_m: float) -> float:
+    """When a rover that armed at 0 reaches ``distance_m`` along its route at cruise speed."""
+    return START_LAG_S + distance_m / CRUISE_MPS
+
+
+def _mover(center_en: EN, radius_m: float, velocity_en: EN) -> dict[str, Any]:
+    """A drum moving at constant velocity from the rover's arming on (``"start": "armed"``)."""
+    return {"center_en": center_en, "radius_m": radius_m, "velocity_en": velocity_en, "start": "armed"}
+
+
 def scenarios(seed: int) -> dict[str, Scenario]:
     two_legs = [(0.0, 0.0), (0.0, 30.0), (25.0, 30.0)]
     line = [(0.0, 0.0), (0.0, 40.0)]
@@ -100,12 +122,16 @@ def scenarios(seed: int) -> dict[str, Scenario]:
         speed, radius, side = rng.uniform(0.3, 1.0), rng.uniform(0.3, 0.6), rng.choice((-1.0, 1.0))
         if rng.random() < 0.6:  # the first leg, northwards along x = 0
             along = rng.uniform(6.0, 27.0)
-            arrive_s = along / CRUISE_MPS + rng.uniform(-3.0, 3.0)
-            crossing.append({"center_en": (side * speed * arrive_s, along), "radius_m": radius, "velocity_en": (-side * speed, 0.0)})
+            arrive_s = _arrival_s(along) + rng.uniform(-ARRIVAL_JITTER_S, ARRIVAL_JITTER_S)
+            crossing.append(_mover((side * speed * arrive_s, along), radius, (-side * speed, 0.0)))
         else:  # the second leg, eastwards along y = 30
             along = rng.uniform(3.0, 22.0)
-            arrive_s = (30.0 + along) / CRUISE_MPS + rng.uniform(-3.0, 3.0)
-            crossing.append({"center_en": (along, 30.0 + side * speed * arrive_s), "radius_m": radius, "velocity_en": (0.0, -side * speed)})
+            arrive_s = _arrival_s(30.0 + along) + rng.uniform(-ARRIVAL_JITTER_S, ARRIVAL_JITTER_S)
+            crossing.append(_mover((along, 30.0 + side * speed * arrive_s), radius, (0.0, -side * speed)))
+    rng = random.Random(seed * 7919 + 1)
+    head_on = [_mover((rng.uniform(-0.5, 0.5), rng.uniform(18.0, 28.0)), rng.uniform(0.25, 0.5), (0.0, -rng.uniform(0.3, 1.0)))
+               for _ in range(rng.randint(1, 2))]  # fmt: skip
+    overtaking = [_mover((rng.uniform(-0.4, 0.4), rng.uniform(4.0, 8.0)), rng.uniform(0.25, 0.5), (0.0, rng.uniform(0.3, 0.6)))]
     return {
         "open": Scenario("open", two_legs),
         "scattered": Scenario("scattered", two_legs, scatter=10),
@@ -116,6 +142,8 @@ def scenarios(seed: int) -> dict[str, Scenario]:
             {"center_en": (0.5, 28.0), "radius_m": 0.5, "velocity_en": (0.0, -0.3)},
         ]),  # fmt: skip
         "crossing": Scenario("crossing", two_legs, moving=crossing),
+        "head_on": Scenario("head_on", [(0.0, 0.0), (0.0, 30.0)], moving=head_on),
+        "overtaking": Scenario("overtaking", [(0.0, 0.0), (0.0, 30.0)], moving=overtaking),
     }
 
 
@@ -145,7 +173,8 @@ def write_inputs(scenario: Scenario, folder: Path) -> tuple[Path, Path | None]:
     ]
     features += [
         {"type": "Feature", "geometry": {"type": "Point", "coordinates": lonlat(m["center_en"])},
-         "properties": {"radius_m": m["radius_m"], "motion": {"type": "velocity", "velocity_mps": list(m["velocity_en"])}}}
+         "properties": {"radius_m": m["radius_m"],
+                        "motion": {"type": "velocity", "velocity_mps": list(m["velocity_en"]), "start": m.get("start", "boot")}}}
         for m in scenario.moving
     ]  # fmt: skip
     world_path = folder / "world.geojson"
@@ -223,8 +252,8 @@ def _mean(values: list[float]) -> float:
     return statistics.fmean(values) if values else math.nan
 
 
-FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100}
-QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2}
+FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100, "head_on": 100, "overtaking": 100}
+QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2, "head_on": 1, "overtaking": 1}
 PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 

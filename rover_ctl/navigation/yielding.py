@@ -1,0 +1,123 @@
+"""Yielding to crossing traffic: the speed along the path at which no moving obstacle comes too close.
+
+Pure: no clock, no I/O. The autopilot asks ``Yielder.limit`` every control step, with the moving
+obstacle tracks (``rover_ctl.navigation.tracks``), and caps the navigator's speed with the answer.
+
+**Why.** The fuzzy rule base reacts to where an obstacle *is*: one crossing from the left reads
+as an obstacle on the left and the rover turns right, which is where a crossing obstacle is going.
+A driver does the opposite: keeps the line and lets it pass. This is the path-velocity
+decomposition of Kant and Zucker (1986): the path is the planner's and the navigator's, and only
+the speed along it is chosen so as to miss the moving obstacles.
+
+**Method.** The rover at ``p`` is taken to go on along its path, the unit vector ``u`` towards the
+navigator's target (the carrot: during an evasive turn the heading says little about where the
+rover is going), at a fraction ``s`` of the speed it was given, ``V``; a track at ``q`` with velocity ``w`` goes on at ``w``.
+Their separation ``d(tau) = (q - p) + (w - s V u) tau`` is closest at
+
+    tau* = clip(-(r . v) / (v . v), 0, T)   with r = q - p, v = w - s V u
+
+and the rover is in conflict with the track when ``|d(tau*)| < R``, ``R = robot radius +
+margin_m`` (the track is an echo on the obstacle's near surface, so its own size is not added).
+The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that is in
+conflict with no track; ``None`` (no limit) when full speed is free, or when no fraction is free:
+an obstacle that will reach even a stopped rover (head-on, or walking into it) is one to steer
+around, which the navigator does, not one to wait for.
+
+Only tracks that *cross* are yielded to: the component of ``w`` across ``u`` of at least
+``min_cross_mps`` and at least ``sin(min_cross_deg)`` of its speed (a track's velocity is noisy: a
+walker coming head-on must not read as crossing). An obstacle walking along the rover's line (ahead, slower: to be overtaken;
+towards it: head-on) is steered around like a static one; waiting behind it would never end.
+
+**Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
+full speed clears it by ``release_margin_m`` more, so that track noise does not make it lurch.
+A yielded-to obstacle often loses its track while it passes (its echo jumps across its surface as
+it moves from one beam to the next, beyond the tracker's gate, and a new track starts with no
+velocity). So the last estimate of every track yielded to is kept, and while its track is gone
+it stands in for it, moving on at its last velocity, for at most ``max_wait_s``: the rover waits
+until that obstacle has passed, not until it was lost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable
+
+from rover_ctl.config import YieldParams
+from rover_ctl.navigation.tracks import Track
+
+
+@dataclass(frozen=True)
+class YieldDecision:
+    """A speed cap for this step, and the track it yields to (None: drive on)."""
+
+    speed_limit_mps: float | None
+    track_ident: int | None = None
+
+
+def _snapshot(track: Track) -> Track:
+    """A copy of a track's estimate (the tracker goes on updating its own)."""
+    return Track(track.ident, track.time_s, track.east_m, track.north_m, track.v_east_mps, track.v_north_mps)
+
+
+def closest_approach_m(r_east: float, r_north: float, v_east: float, v_north: float, horizon_s: float) -> float:
+    """Smallest ``|r + v tau|`` over ``tau`` in ``[0, horizon_s]`` (relative position and velocity)."""
+    vv = v_east * v_east + v_north * v_north
+    tau = 0.0 if vv <= 1e-12 else min(max(-(r_east * v_east + r_north * v_north) / vv, 0.0), horizon_s)
+    return math.hypot(r_east + v_east * tau, r_north + v_north * tau)
+
+
+class Yielder:
+    """Chooses the speed along the path that lets crossing obstacles pass (see the module docstring)."""
+
+    def __init__(self, params: YieldParams, robot_radius_m) -> None:
+        """``params`` is read at every call; ``robot_radius_m`` is a function giving the radius in force."""
+        self.params = params
+        self._robot_radius_m = robot_radius_m
+        self._yielding: dict[int, Track] = {}
+        """Tracks yielded to: the last estimate of each (a copy), kept while it is in conflict."""
+
+    def limit(self, east_m: float, north_m: float, course_rad: float, speed_mps: float,
+              tracks: Iterable[Track], time_s: float) -> YieldDecision:  # fmt: skip
+        """The speed cap for a rover at (``east_m``, ``north_m``) going along ``course_rad`` (ENU,
+        towards its target) at ``speed_mps``."""
+        p = self.params
+        if not p.enabled or speed_mps <= 0.0:
+            self._yielding.clear()
+            return YieldDecision(None)
+        live = {t.ident: t for t in tracks}
+        self._yielding = {i: live.get(i, t) for i, t in self._yielding.items() if i in live or time_s - t.time_s <= p.max_wait_s}
+        candidates = {**{i: t for i, t in self._yielding.items() if i not in live}, **live}  # lost ones move on as last seen
+        ue, un = math.cos(course_rad), math.sin(course_rad)
+        radius_m = self._robot_radius_m() + p.margin_m
+        min_share = math.sin(math.radians(p.min_cross_deg))
+        crossing = []
+        for ident, track in candidates.items():
+            e, n = track.position_at(time_s)
+            across_mps = abs(track.v_north_mps * ue - track.v_east_mps * un)
+            if ident in live and (across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps):
+                continue
+            crossing.append((ident, e - east_m, n - north_m, track.v_east_mps, track.v_north_mps))
+        steps = max(int(p.speed_steps), 1)
+        for fraction in (i / steps for i in range(steps, -1, -1)):
+            vr_e, vr_n = fraction * speed_mps * ue, fraction * speed_mps * un
+            blocked = False
+            for ident, re, rn, we, wn in crossing:
+                clear_m = radius_m + (p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0)
+                if closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) < clear_m:
+                    blocked = True
+                    break
+            if blocked:
+                continue
+            conflicts = [c for c in crossing if self._conflicts(c, speed_mps, ue, un, radius_m)]
+            self._yielding = {c[0]: _snapshot(candidates[c[0]]) for c in conflicts} if fraction < 1.0 else {}
+            if fraction >= 1.0:
+                return YieldDecision(None)
+            return YieldDecision(fraction * speed_mps, min(self._yielding, default=None))
+        self._yielding = {}
+        return YieldDecision(None)  # nothing waits it out: steer around it
+
+    def _conflicts(self, track: tuple, speed_mps: float, ue: float, un: float, radius_m: float) -> bool:
+        """Whether the track is in conflict with the rover at full speed (one it is yielding to)."""
+        _, re, rn, we, wn = track
+        return closest_approach_m(re, rn, we - speed_mps * ue, wn - speed_mps * un, self.params.horizon_s) < radius_m
