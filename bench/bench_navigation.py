@@ -19,8 +19,9 @@ sees them only with its rangefinders):
 The moving obstacles of ``crossing``, ``head_on`` and ``overtaking`` start moving when the rover
 arms (world file ``"start": "armed"``), so the encounter does not depend on how long the upload took.
 
-Variants: the rule bases ``paper`` and ``default``, and ``default+predict``: the default rule base
-with obstacle tracks and prediction on (``proximity.horizon_s`` = ``PREDICT_HORIZON_S``).
+Variants: the rule bases ``paper`` and ``default`` (the daemon as shipped: yielding to crossing
+traffic on), and ``default-yield``: the default rule base with yielding off (``YLD_ENABLE`` 0,
+the navigator of the previous rows).
 A collision is "moving" when the rover's true speed at the contact was above
 ``STOPPED_SPEED_MPS``, else "stopped" (struck while yielding).
 
@@ -53,9 +54,7 @@ from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimError, SimOptions, simulate
 
 HOME = (-35.363261, 149.165230, 584.0)
-PREDICT_HORIZON_S = 2.0
-VARIANTS = {"paper": ("paper", []), "default": ("default", []),
-            "default+predict": ("default", [f"proximity.horizon_s={PREDICT_HORIZON_S}"])}  # fmt: skip
+VARIANTS = {"paper": ("paper", []), "default": ("default", []), "default-yield": ("default", ["yielding.enabled=0"])}
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
 """A collision with the rover slower than this (truth) was one it was struck in while stopped."""
@@ -320,8 +319,8 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         "acceptance radius within the time budget, even in the open field."
     )
     markdown += (
-        f"\n\ndefault+predict: the default rule base with obstacle tracks and prediction "
-        f"(`proximity.horizon_s={PREDICT_HORIZON_S:g}`, docs/perception.md). Collisions (moving / stopped): "
+        "\n\ndefault-yield: the default rule base with yielding to crossing traffic off (`YLD_ENABLE=0`, "
+        "docs/perception.md); rows measured before yielding existed ran without it too. Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
         "the split was added have it). Measured: the date of the run that made the row."
     )

@@ -480,12 +480,12 @@ class YieldParams:
     """Yielding to crossing traffic (``rover_ctl.navigation.yielding``): the speed along the path
     at which no moving obstacle track comes within the robot's radius plus ``margin_m``."""
 
-    enabled: bool = False
+    enabled: bool = True
     """Yield to crossing obstacles (needs their tracks: the obstacle memory builds them while this is on)."""
     horizon_s: float = 4.0
     """How far ahead the closest approach is looked for (s): at 1.2 m/s, 4.8 m of path, about the
     rangefinders' reach."""
-    margin_m: float = 0.5
+    margin_m: float = 0.9
     """Clearance kept between the robot's outline (its circumscribed radius) and a crossing
     obstacle's near surface (m)."""
     release_margin_m: float = 0.3
@@ -494,6 +494,13 @@ class YieldParams:
     min_cross_mps: float = 0.15
     """A track counts as crossing when its velocity across the rover's heading is at least this
     (m/s); slower across, it walks along the rover's line and is steered around instead."""
+    min_hits: int = 8
+    """A track is yielded to only after this many echoes (about half a second of one rangefinder)."""
+    max_speed_sd_mps: float = 0.3
+    """...and only while its velocity's standard deviation is at most this (m/s, either axis)."""
+    min_travel_m: float = 0.6
+    """...and only once it has gone this far from its first echo (m): an echo sliding over a static
+    drum's face moves up to about its radius; 1.6 s of a pedestrian at 0.5 m/s."""
     max_wait_s: float = 10.0
     """Longest an obstacle yielded to is still waited for after its track was lost (s): meanwhile
     it is taken to move on at its last velocity."""

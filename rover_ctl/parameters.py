@@ -381,6 +381,9 @@ _DECLARED: tuple[tuple, ...] = (
     ("yielding.release_margin_m", "YLD_RELEASE", 0.0, 10.0, RW, {}),
     ("yielding.min_cross_mps", "YLD_MIN_CROSS", 0.0, 10.0, RW, {}),
     ("yielding.min_cross_deg", "YLD_MIN_ANGLE", 0.0, 90.0, RW, {"units": "deg"}),
+    ("yielding.min_hits", "YLD_MIN_HITS", 1, 1000, RW, {}),
+    ("yielding.max_speed_sd_mps", "YLD_MAX_VEL_SD", 0.01, 10.0, RW, {}),
+    ("yielding.min_travel_m", "YLD_MIN_TRAVEL", 0.0, 100.0, RW, {}),
     ("yielding.max_wait_s", "YLD_MAX_WAIT", 0.0, 120.0, RW, {}),
     ("yielding.speed_steps", "YLD_SPD_STEPS", 1, 20, RW, {}),
 )

@@ -523,7 +523,8 @@ class Autopilot:
             rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
             tracks = self.proximity.tracker.moving(t_s, rover_velocity)
             course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
-            yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s)
+            alive = {track.ident for track in self.proximity.tracker.tracks}
+            yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive)
             if yielded.speed_limit_mps is not None:
                 speed_mps = yielded.speed_limit_mps
                 row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)

@@ -218,7 +218,8 @@ def ex_yielding(d: Daemon) -> list:
         north = 0.0
         for k in range(150):
             t = k * 0.1
-            tracks = [Track(1, t, -2.5 + ve * t, 3.5 + vn * t, ve, vn)] if k < 40 or ve < 0.5 else []
+            hits, vv = (5 + k, 0.3 / (1 + k)) if k < 40 or ve < 0.5 else (0, 0.0)
+            tracks = [Track(1, t, -2.5 + ve * t, 3.5 + vn * t, ve, vn, vv=vv, hits=hits, born_en=(-2.5 - 4.0 * ve, 3.5))] if hits else []
             decision = yielder.limit(0.0, north, math.pi / 2, speed_limit, tracks, t)
             speed = speed_limit if decision.speed_limit_mps is None else decision.speed_limit_mps
             north += speed * 0.1

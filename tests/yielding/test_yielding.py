@@ -39,7 +39,7 @@ def drive(y: Yielder, track_at, cruise_mps: float = 1.2, duration_s: float = 15.
 
 def crossing(t: float) -> Track:
     """A pedestrian from the west crossing the rover's line 5 m ahead at 0.8 m/s, timed to meet it."""
-    return Track(1, t, -3.4 + 0.8 * t, 5.0, 0.8, 0.0)
+    return Track(1, t, -3.4 + 0.8 * t, 5.0, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0))
 
 
 def test_closest_approach():
@@ -61,7 +61,7 @@ def test_a_pedestrian_crossing_ahead_is_waited_for_and_the_rover_goes_on_behind_
 def test_a_pedestrian_stepping_out_close_ahead_stops_the_rover():
     """The later a crossing pedestrian is seen, the slower the rover must go: 2.5 m ahead it may
     go on at half speed, 1.2 m ahead only a stop lets it pass."""
-    speeds = [yielder().limit(0.0, 0.0, NORTH, 1.2, [Track(1, 0.0, -1.2, ahead, 0.8, 0.0)], 0.0).speed_limit_mps
+    speeds = [yielder().limit(0.0, 0.0, NORTH, 1.2, [Track(1, 0.0, -1.2, ahead, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0))], 0.0).speed_limit_mps
               for ahead in (2.5, 1.5, 1.2)]  # fmt: skip
     assert speeds == sorted(speeds, reverse=True) and speeds[0] >= 0.6 and speeds[-1] == 0.0
 
@@ -82,17 +82,27 @@ def test_head_on_and_walking_ahead_are_not_yielded_to():
     """An obstacle on the rover's line (head-on, or ahead and slower) is steered around, not
     waited for: waiting for it never ends, or it walks into a stopped rover."""
     y = yielder()
-    head_on = Track(1, 0.0, 0.1, 6.0, 0.1, -0.8)  # its velocity wobbles 7 degrees off the line
-    ahead = Track(2, 0.0, -0.1, 3.0, -0.05, 0.4)
+    head_on = Track(1, 0.0, 0.1, 6.0, 0.1, -0.8, hits=20, born_en=(-9.0, 0.0))  # its velocity wobbles 7 degrees off the line
+    ahead = Track(2, 0.0, -0.1, 3.0, -0.05, 0.4, hits=20, born_en=(-9.0, 0.0))
     assert y.limit(0.0, 0.0, NORTH, 1.2, [head_on], 0.0).speed_limit_mps is None
     assert y.limit(0.0, 0.0, NORTH, 1.2, [ahead], 0.0).speed_limit_mps is None
 
 
-def test_an_obstacle_that_would_reach_a_stopped_rover_is_not_waited_for():
-    """Crossing straight at the rover's position: stopping does not help, so no limit (the
-    navigator steers away) rather than a stop in its way."""
-    at_the_rover = Track(1, 0.0, -2.0, 0.0, 0.8, 0.0)
-    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [at_the_rover], 0.0).speed_limit_mps is None
+def test_when_no_speed_is_free_the_one_that_keeps_the_obstacle_farthest():
+    """Crossing 1 m ahead, 1.5 m off the line: every speed comes within the margin (full speed
+    0.69 m, a stop 1.0 m), so the rover stops rather than drive on into its path."""
+    at_the_rover = Track(1, 0.0, -1.5, 1.0, 0.8, 0.0, hits=20, born_en=(-9.0, 1.0))
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [at_the_rover], 0.0).speed_limit_mps == 0.0
+
+
+def test_unsure_tracks_are_not_yielded_to():
+    """Few echoes, or a velocity still uncertain: no yield (a sliding echo makes such tracks)."""
+    young = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=3)
+    unsure = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0), vv=0.5**2)
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [young], 0.0).speed_limit_mps is None
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [unsure], 0.0).speed_limit_mps is None
+    wandering = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-1.5, 1.4))  # 0.3 m from its first echo
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [wandering], 0.0).speed_limit_mps is None
 
 
 def test_disabled_or_standing_still_no_limit():
@@ -108,7 +118,7 @@ def test_perpendicular_crossing_traffic_never_comes_within_the_robot_radius(star
     """Whatever the timing, a rover that obeys the limit is never touched by a perpendicular
     crosser whose track it sees from the start (truth = track)."""
     def track_at(t: float) -> Track:
-        return Track(1, t, side * (start_east + speed * t), north_m, side * speed, 0.0)
+        return Track(1, t, side * (start_east + speed * t), north_m, side * speed, 0.0, hits=20, born_en=(-9.0, 0.0))
 
     y = yielder()
     north, closest = 0.0, math.inf
