@@ -202,10 +202,6 @@ def ex_tracks(d: Daemon) -> list:
     return trace
 
 
-def yielding_on(d: Daemon) -> None:
-    d.config.yielding.enabled = True
-
-
 def ex_yielding(d: Daemon) -> list:
     """The rover drives north at 1.2 m/s (when let) past obstacles crossing at several angles and
     speeds; one track is lost halfway and must be waited for as last seen."""
@@ -388,7 +384,7 @@ EXERCISES = {
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
     "link": (no_mission, ex_link, ("link.radio_txbuf_low_pct", "link.override_min_hz", "link.health_period_s", "link.rate_window_s",
                                    "link.radio_status_timeout_s")),
-    "yielding": (yielding_on, ex_yielding, ("yielding.", "robot.footprint_length_m", "robot.footprint_width_m")),
+    "yielding": (no_mission, ex_yielding, ("yielding.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "yield_switch": (no_mission, ex_yield_switch, ("yielding.enabled",)),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
 }
@@ -405,6 +401,8 @@ def candidates(param: Param) -> list[float]:
         return [float(n) for n in param.choices if n != param.default]
     if param.kind is Kind.MASK:
         return [float(m) for m in (0, 1, 3, 255) if m != param.default]
+    if param.kind is Kind.BOOL:
+        return [0.0 if param.default else 1.0]
     d, lo, hi = param.default, param.minimum, param.maximum
     raw = [d * 2, d / 2, hi, lo, (lo + hi) / 2, d + 1, d - 1]
     out = []
