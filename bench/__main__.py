@@ -34,6 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")
     parser.add_argument("--only", metavar="SCENARIO,...", help="navigation: run only these scenarios (the other rows are kept from the last run)")
     parser.add_argument("--worlds", type=int, metavar="N", help="navigation: N seeded worlds per scenario instead of the full counts")
+    parser.add_argument("--variants", metavar="NAME,...", help="navigation: run only these variants (rule base + settings; the other rows are kept)")
     args = parser.parse_args(argv)
     names = args.names or available()
     unknown = sorted(set(names) - set(available()))
@@ -43,13 +44,17 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         print(f"== bench {name}", flush=True)
         started = time.perf_counter()
-        options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds)) if v}
+        options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds),
+                                     ("variants", args.variants and args.variants.split(","))) if v}  # fmt: skip
         if options and name != "navigation":
-            parser.error(f"--only and --worlds apply to the navigation benchmark, not {name}")
+            parser.error(f"--only, --worlds and --variants apply to the navigation benchmark, not {name}")
         module = importlib.import_module(f"bench.bench_{name}")
         unknown = sorted(set(options.get("only", ())) - set(getattr(module, "FULL_WORLDS", ())))
         if unknown:
             parser.error(f"unknown scenario(s) {', '.join(unknown)} (known: {', '.join(module.FULL_WORLDS)})")
+        unknown = sorted(set(options.get("variants", ())) - set(getattr(module, "VARIANTS", ())))
+        if unknown:
+            parser.error(f"unknown variant(s) {', '.join(unknown)} (known: {', '.join(module.VARIANTS)})")
         result = module.run(quick=args.quick, **options)
         result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
         result.setdefault("date", time.strftime("%Y-%m-%d"))

@@ -257,9 +257,9 @@ PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 
 
-def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -> dict[str, Any]:
-    """All scenarios and variants, or ``only`` these scenarios (the others' rows kept from the
-    last run), on ``worlds`` seeded worlds each instead of the default counts."""
+def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, variants: list[str] | None = None) -> dict[str, Any]:
+    """All scenarios and variants, or ``only`` these scenarios and ``variants`` (the other rows
+    kept from the last run), on ``worlds`` seeded worlds each instead of the default counts."""
     counts = dict(QUICK_WORLDS if quick else FULL_WORLDS)
     unknown = sorted(set(only or ()) - set(counts))
     if unknown:
@@ -268,13 +268,14 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         counts = {name: counts[name] for name in only}
     if worlds:
         counts = {name: worlds for name in counts}
-    jobs = [(name, variant, seed) for name, count in counts.items() for variant in VARIANTS for seed in range(1, count + 1)]
+    ran = [v for v in VARIANTS if not variants or v in variants]
+    jobs = [(name, variant, seed) for name, count in counts.items() for variant in ran for seed in range(1, count + 1)]
     with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
         runs = list(pool.map(lambda job: one_run(*job, Path(tmp)), jobs))
     today = time.strftime("%Y-%m-%d")
     fresh = []
     for name in counts:
-        for variant in VARIANTS:
+        for variant in ran:
             group = [r for r in runs if r["scenario"] == name and r["rulebase"] == variant]
             fresh.append({
                 "scenario": name, "rulebase": variant, "runs": len(group), "date": today,
@@ -289,10 +290,15 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
                 "latency_p99_ms": max((r.get("latency_p99_ms") or 0.0 for r in group), default=math.nan),
             })  # fmt: skip
     rows = fresh
-    if only and PREVIOUS.exists():
+    if (only or variants) and PREVIOUS.exists():
         previous = json.loads(PREVIOUS.read_text())
-        kept = [dict(r, date=r.get("date", previous.get("date"))) for r in previous.get("rows", []) if r["scenario"] not in counts]
-        runs = [r for r in previous.get("runs", []) if r["scenario"] not in counts] + runs
+
+        def fresh_now(r: dict) -> bool:
+            return r["scenario"] in counts and r["rulebase"] in ran
+
+        kept = [dict(r, date=r.get("date", previous.get("date"))) for r in previous.get("rows", [])
+                if not fresh_now(r) and r["rulebase"] in VARIANTS]  # fmt: skip
+        runs = [r for r in previous.get("runs", []) if not fresh_now(r) and r["rulebase"] in VARIANTS] + runs
         order = list(FULL_WORLDS)
         rows = sorted(kept + fresh, key=lambda r: (order.index(r["scenario"]) if r["scenario"] in order else len(order), list(VARIANTS).index(r["rulebase"])))
     lines = [
@@ -324,8 +330,9 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
         "the split was added have it). Measured: the date of the run that made the row."
     )
-    if only or worlds:
+    if only or worlds or variants:
         markdown += (f"\n\n_This run: `--only {','.join(counts)}`" if only else "\n\n_This run: all scenarios") + \
+            (f" `--variants {','.join(ran)}`" if variants else "") + \
             (f" on {worlds} worlds each (to fit the wall time; the full counts are {FULL_WORLDS})" if worlds else "") + \
             "; the other rows are kept from the run named by their date._"  # fmt: skip
     if quick:
