@@ -1,16 +1,8 @@
 """Navigation benchmark: seeded worlds driven end to end (emulator + daemon in lockstep), per rule base.
 
-Scenarios (all at ArduPilot's CMAC field; the daemon is never told where the obstacles are, it
-sees them only with its rangefinders):
-
-* ``open``: no obstacles, two legs (0,0) -> (0,30) -> (25,30).
-* ``scattered``: the same legs with ``rover-sitl --scatter`` obstacles (seeded; >= 2 m gaps).
-* ``walls``: one straight leg of 40 m crossed by two walls, each with a 2.5 m gap off the line.
-* ``cul_de_sac``: a U of walls open towards the rover on the line of a 30 m leg.
-* ``moving``: a 0.6 m drum crossing the 30 m leg at 0.5 m/s, and one travelling against the rover.
-* ``crossing``: crossing traffic on the two legs of ``open``: 2-5 drums (radius 0.3-0.6 m) at
-  0.3-1.0 m/s, each crossing one leg at right angles from either side, timed (seeded, +-3 s) to
-  reach the leg about when a rover at cruise speed gets there.
+Scenarios: ``rover_ctl.tuning.scenarios`` (open, scattered, walls, cul_de_sac, moving, crossing;
+all at ArduPilot's CMAC field, shared with ``rover-ctl tune``; the daemon is never told where the
+obstacles are, it sees them only with its rangefinders).
 
 Variants: the rule bases ``paper`` and ``default``, and ``default+predict``: the default rule base
 with obstacle tracks and prediction on (``proximity.horizon_s`` = ``PREDICT_HORIZON_S``).
@@ -28,128 +20,47 @@ from __future__ import annotations
 
 import json
 import math
-import random
 import statistics
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from rover_ctl.config import PlannerParams, RobotParams
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
-from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
 from rover_ctl.navigation.planner import Circle, Planner
+from rover_ctl.tuning.scenarios import HOME, Scenario, scenarios, world_doc
+from rover_ctl.tuning.scenarios import mission as scenario_mission
 from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimError, SimOptions, simulate
 
-HOME = (-35.363261, 149.165230, 584.0)
 PREDICT_HORIZON_S = 2.0
 VARIANTS = {"paper": ("paper", []), "default": ("default", []),
             "default+predict": ("default", [f"proximity.horizon_s={PREDICT_HORIZON_S}"])}  # fmt: skip
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
 """A collision with the rover slower than this (truth) was one it was struck in while stopped."""
-CRUISE_MPS = 1.2
-"""executor.cruise_speed_mps: the crossing traffic is timed for it."""
 WORKERS = 2
 """Simulations run side by side (each is two processes; the machine has 2 cores)."""
 ACCEPTANCE_RADIUS_M = 0.5
 """Waypoint acceptance radius for the runs: small, so that cutting corners does not shorten paths."""
 TIME_BUDGET_S = 240.0
 """Sim seconds a mission may take before it counts as failed."""
-NAV_WAYPOINT = 16
 
 EN = tuple[float, float]
 
 
-@dataclass
-class Scenario:
-    name: str
-    legs_en: list[EN]
-    """Home first, then the waypoints."""
-    circles: list[tuple[EN, float]] = field(default_factory=list)
-    polygons: list[list[EN]] = field(default_factory=list)
-    moving: list[dict[str, Any]] = field(default_factory=list)
-    """Circle features with a "motion" member (centre_en, radius_m, velocity_en)."""
-    scatter: int = 0
-
-
-def _wall(a: EN, b: EN, thickness_m: float = 0.3) -> list[EN]:
-    """A thin rectangle from a to b."""
-    (ax, ay), (bx, by) = a, b
-    length = math.dist(a, b)
-    nx, ny = -(by - ay) / length * thickness_m / 2, (bx - ax) / length * thickness_m / 2
-    return [(ax + nx, ay + ny), (bx + nx, by + ny), (bx - nx, by - ny), (ax - nx, ay - ny)]
-
-
-def scenarios(seed: int) -> dict[str, Scenario]:
-    two_legs = [(0.0, 0.0), (0.0, 30.0), (25.0, 30.0)]
-    line = [(0.0, 0.0), (0.0, 40.0)]
-    gap1 = 1.0 + (seed % 3)  # gap position varies with the seed
-    walls = [
-        _wall((-12.0, 14.0), (gap1, 14.0)), _wall((gap1 + 2.5, 14.0), (12.0, 14.0)),
-        _wall((-12.0, 26.0), (-gap1 - 2.5, 26.0)), _wall((-gap1, 26.0), (12.0, 26.0)),
-    ]  # fmt: skip
-    cul = [_wall((-2.5, 12.0), (-2.5, 17.0)), _wall((-2.5, 17.0), (2.5, 17.0)), _wall((2.5, 17.0), (2.5, 12.0))]
-    rng = random.Random(seed)
-    crossing = []
-    for _ in range(rng.randint(2, 5)):
-        speed, radius, side = rng.uniform(0.3, 1.0), rng.uniform(0.3, 0.6), rng.choice((-1.0, 1.0))
-        if rng.random() < 0.6:  # the first leg, northwards along x = 0
-            along = rng.uniform(6.0, 27.0)
-            arrive_s = along / CRUISE_MPS + rng.uniform(-3.0, 3.0)
-            crossing.append({"center_en": (side * speed * arrive_s, along), "radius_m": radius, "velocity_en": (-side * speed, 0.0)})
-        else:  # the second leg, eastwards along y = 30
-            along = rng.uniform(3.0, 22.0)
-            arrive_s = (30.0 + along) / CRUISE_MPS + rng.uniform(-3.0, 3.0)
-            crossing.append({"center_en": (along, 30.0 + side * speed * arrive_s), "radius_m": radius, "velocity_en": (0.0, -side * speed)})
-    return {
-        "open": Scenario("open", two_legs),
-        "scattered": Scenario("scattered", two_legs, scatter=10),
-        "walls": Scenario("walls", line, polygons=walls),
-        "cul_de_sac": Scenario("cul_de_sac", [(0.0, 0.0), (0.0, 30.0)], polygons=cul),
-        "moving": Scenario("moving", [(0.0, 0.0), (0.0, 30.0)], moving=[
-            {"center_en": (-8.0, 12.0), "radius_m": 0.6, "velocity_en": (0.5, 0.0)},
-            {"center_en": (0.5, 28.0), "radius_m": 0.5, "velocity_en": (0.0, -0.3)},
-        ]),  # fmt: skip
-        "crossing": Scenario("crossing", two_legs, moving=crossing),
-    }
-
-
 def write_inputs(scenario: Scenario, folder: Path) -> tuple[Path, Path | None]:
     """The mission file and (unless scattered) the world file of a scenario."""
-    frame = LocalFrame(*HOME)
-
-    def lonlat(point: EN) -> list[float]:
-        lat, lon = frame.to_geodetic(*point)
-        return [lon, lat]
-
-    items = []
-    for east, north in scenario.legs_en[1:]:
-        lat, lon = frame.to_geodetic(east, north)
-        items.append(MissionItem(NAV_WAYPOINT, FRAME_GLOBAL_RELATIVE_ALT, x=lat, y=lon))
     mission_path = folder / "mission.waypoints"
-    save_mission(Mission(items=items, home=Home(*HOME)), mission_path)
+    save_mission(scenario_mission(scenario), mission_path)
     if scenario.scatter:
         return mission_path, None
-    features = [
-        {"type": "Feature", "geometry": {"type": "Point", "coordinates": lonlat(c)}, "properties": {"radius_m": r}}
-        for c, r in scenario.circles
-    ]
-    features += [
-        {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [[lonlat(p) for p in poly + [poly[0]]]]}, "properties": {}}
-        for poly in scenario.polygons
-    ]
-    features += [
-        {"type": "Feature", "geometry": {"type": "Point", "coordinates": lonlat(m["center_en"])},
-         "properties": {"radius_m": m["radius_m"], "motion": {"type": "velocity", "velocity_mps": list(m["velocity_en"])}}}
-        for m in scenario.moving
-    ]  # fmt: skip
     world_path = folder / "world.geojson"
-    world_path.write_text(json.dumps({"type": "FeatureCollection", "home": [HOME[1], HOME[0], HOME[2], 0.0], "features": features}))
+    world_path.write_text(json.dumps(world_doc(scenario)))
     return mission_path, world_path
 
 
