@@ -22,8 +22,9 @@ Seeds: from ``seed``, one ``random.Random`` draws distinct world seeds, the trai
 then the held-out ones, so the held-out set never overlaps the training set.
 
 The Dask cluster: ``scheduler`` (``tcp://HOST:PORT``) attaches to a running one; otherwise a
-``LocalCluster`` of one single-threaded worker process per core listens on 127.0.0.1 only,
-without a dashboard, and is closed at the end (also on an error or Ctrl-C).
+``LocalCluster`` of one single-threaded worker process per core listens on 127.0.0.1 only (its
+scheduler's HTTP server too, on a free port), without a dashboard, and is closed at the end (also
+on an error or Ctrl-C).
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ SIGMA0 = 0.1
 by 0.4 m on a 4 m rangefinder universe)."""
 REPAIR_PENALTY = 100.0
 """Score added per squared unit of distance between a vector and its repaired form."""
+LOOPBACK = "127.0.0.1"
 SEED_SPACE = 1_000_000
 """World seeds are drawn from 1..SEED_SPACE."""
 
@@ -143,8 +145,11 @@ class Cluster:
             if scheduler:
                 self.client = Client(scheduler, timeout="10s")
             else:
+                # Loopback only: the scheduler, the workers and the scheduler's small HTTP server (health and
+                # metrics routes, which it starts even without a dashboard) on a free port, no dashboard.
                 self.cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                            host="127.0.0.1", dashboard_address=None, silence_logs=50)  # fmt: skip
+                                            host=LOOPBACK, dashboard_address=None, silence_logs=50,
+                                            scheduler_kwargs={"dashboard_address": f"{LOOPBACK}:0"})  # fmt: skip
                 self.client = Client(self.cluster)
         except (OSError, TimeoutError) as exc:
             self.close()

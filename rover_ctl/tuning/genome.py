@@ -24,9 +24,9 @@ and spread to at least ``MIN_GAP_FRACTION`` of the universe apart, then rounded 
 gap keeps every support non-zero, clipping keeps everything inside the universe:
 ``tests/tune/test_genome.py`` checks this on arbitrary vectors (Hypothesis).
 
-Optionally (``scale_outputs``) one more number scales every output set about 0 (the navigator
-scales the largest output peak to the top wheel speed, so this changes the *other* sets' relative
-speeds only through clipping; it is off by default).
+Optionally (``scale_outputs``) one more number scales every output set and range about 0, within
+``OUTPUT_SCALE_RANGE`` (off by default: the navigator scales the largest output peak to the top
+wheel speed, so a common scale matters only where it meets a fixed output default).
 """
 
 from __future__ import annotations
@@ -47,6 +47,8 @@ MIN_GAP_FRACTION = 1e-3
 """Smallest distance between two free values, as a fraction of the universe (or half period)."""
 DECIMALS = 4
 """Decimals of a breakpoint in a candidate (and in the tuned file)."""
+MAX_STEP = 1e3
+"""Vector entries are clipped to +-this (universes) before the repair: no overflow, same result."""
 OUTPUT_SCALE_RANGE = (0.5, 1.5)
 """Bounds of the optional output scale."""
 
@@ -116,7 +118,7 @@ class Genome:
         x = np.asarray(x, dtype=float)
         if x.shape != (self.size,):
             raise ValueError(f"expected a vector of {self.size} numbers, got shape {x.shape}")
-        x = np.where(np.isfinite(x), x, 0.0)  # a NaN from outside: the source value
+        x = np.clip(np.where(np.isnan(x), 0.0, x), -MAX_STEP, MAX_STEP)  # NaN: the source value; inf: the far end
         raw = [g.value + xi * g.scale for g, xi in zip(self.genes, x[: len(self.genes)])]
         groups: dict[tuple[str, str, float, float], list[int]] = {}
         for i, g in enumerate(self.genes):
@@ -153,11 +155,14 @@ class Genome:
             for name, spec in doc[kind].items():
                 mapping = moved.get((kind, self.twin_of.get((kind, name), name)), {})
                 period = spec.get("period")
+                scaled = kind == "outputs" and scale != 1.0
                 for set_name, points in spec["sets"].items():
                     new = [_map(float(p), mapping, period) for p in points]
-                    if kind == "outputs" and scale != 1.0:
+                    if scaled:
                         new = [round(p * scale, DECIMALS) for p in new]
                     spec["sets"][set_name] = [float(p) for p in new]
+                if scaled:  # the universe with its sets (the sampled defuzzifiers sample the range)
+                    spec["range"] = [round(float(v) * scale, DECIMALS) for v in spec["range"]]
         return doc
 
     def decode(self, x: np.ndarray) -> tuple[dict[str, Any], RuleBase]:
