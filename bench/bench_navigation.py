@@ -105,10 +105,10 @@ def collisions_moving(out: Path) -> tuple[int, int]:
     return moving, stopped
 
 
-def one_run(name: str, variant: str, seed: int, root: Path) -> dict[str, Any]:
+def one_run(name: str, variant: str, seed: int, root: Path, variants: dict = VARIANTS) -> dict[str, Any]:
     scenario = scenarios(seed)[name]
-    rulebase, overrides = VARIANTS[variant]
-    folder = root / f"{name}-{variant}-{seed}"
+    rulebase, overrides = variants[variant]
+    folder = root / f"{name}-{variant.replace('/', '_')}-{seed}"
     folder.mkdir(parents=True)
     mission_path, world_path = write_inputs(scenario, folder)
     options = SimOptions(mission=mission_path, out=folder / "run", world=world_path, obstacles=scenario.scatter or None,
@@ -140,9 +140,17 @@ PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 
 
-def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -> dict[str, Any]:
+def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, rulebase: str | None = None) -> dict[str, Any]:
     """All scenarios and variants, or ``only`` these scenarios (the others' rows kept from the
-    last run), on ``worlds`` seeded worlds each instead of the default counts."""
+    last run), on ``worlds`` seeded worlds each instead of the default counts. ``rulebase``: a
+    rule base file (a ``rover-ctl tune`` result) against ``default`` instead of the variants, in
+    a table of its own (``bench/results/navigation_rulebase.json``)."""
+    variants = VARIANTS
+    if rulebase:
+        path = Path(rulebase).resolve()
+        if not path.is_file():
+            raise ValueError(f"--rulebase {rulebase}: no such file")
+        variants = {"default": VARIANTS["default"], path.name: (str(path), [])}
     counts = dict(QUICK_WORLDS if quick else FULL_WORLDS)
     unknown = sorted(set(only or ()) - set(counts))
     if unknown:
@@ -151,13 +159,13 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         counts = {name: counts[name] for name in only}
     if worlds:
         counts = {name: worlds for name in counts}
-    jobs = [(name, variant, seed) for name, count in counts.items() for variant in VARIANTS for seed in range(1, count + 1)]
+    jobs = [(name, variant, seed) for name, count in counts.items() for variant in variants for seed in range(1, count + 1)]
     with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
-        runs = list(pool.map(lambda job: one_run(*job, Path(tmp)), jobs))
+        runs = list(pool.map(lambda job: one_run(*job, Path(tmp), variants), jobs))
     today = time.strftime("%Y-%m-%d")
     fresh = []
     for name in counts:
-        for variant in VARIANTS:
+        for variant in variants:
             group = [r for r in runs if r["scenario"] == name and r["rulebase"] == variant]
             fresh.append({
                 "scenario": name, "rulebase": variant, "runs": len(group), "date": today,
@@ -172,7 +180,7 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
                 "latency_p99_ms": max((r.get("latency_p99_ms") or 0.0 for r in group), default=math.nan),
             })  # fmt: skip
     rows = fresh
-    if only and PREVIOUS.exists():
+    if only and PREVIOUS.exists() and not rulebase:
         previous = json.loads(PREVIOUS.read_text())
         kept = [dict(r, date=r.get("date", previous.get("date"))) for r in previous.get("rows", []) if r["scenario"] not in counts]
         runs = [r for r in previous.get("runs", []) if r["scenario"] not in counts] + runs
@@ -207,6 +215,11 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
         "the split was added have it). Measured: the date of the run that made the row."
     )
+    if rulebase:
+        markdown += (f"\n\n_This run: `--rulebase {rulebase}` against default on {', '.join(f'{n} seeds 1-{c}' for n, c in counts.items())}._")
+        command = f"python -m bench navigation --only {','.join(counts)}" + (f" --worlds {worlds}" if worlds else "") + f" --rulebase {rulebase}"
+        return {"title": f"Navigation: default vs {Path(rulebase).name} (emulator in the loop)", "name": "navigation_rulebase", "command": command,
+                "markdown": markdown, "rows": rows, "runs": runs, "quick": quick, "rulebase": str(rulebase)}  # fmt: skip
     if only or worlds:
         markdown += (f"\n\n_This run: `--only {','.join(counts)}`" if only else "\n\n_This run: all scenarios") + \
             (f" on {worlds} worlds each (to fit the wall time; the full counts are {FULL_WORLDS})" if worlds else "") + \
