@@ -20,7 +20,6 @@ from typing import Any
 from bench.bench_navigation import ACCEPTANCE_RADIUS_M, TIME_BUDGET_S, write_inputs
 from rover_ctl.app.sim import SimOptions, simulate
 from rover_ctl.app.tune import Cluster
-from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.tuning.genome import load_document
 from rover_ctl.tuning.scenarios import scenarios
 from rover_ctl.tuning.tasks import run_episode_task

@@ -47,7 +47,7 @@ import numpy as np
 from rover_ctl.tuning import scenarios as scenario_defs
 from rover_ctl.tuning.episode import Outcome
 from rover_ctl.tuning.genome import Genome, load_document
-from rover_ctl.tuning.objective import Weights, episode_cost, score
+from rover_ctl.tuning.objective import Weights, score
 from rover_ctl.tuning.tasks import run_episode_task
 from rover_ctl.tuning.toml_file import to_toml
 
