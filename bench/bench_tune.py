@@ -87,3 +87,50 @@ def run(quick: bool) -> dict[str, Any]:
     )
     return {"title": "Tuning episode runner", "markdown": markdown, "single": single_rate, "dask": dask_rate, "workers": WORKERS,
             "efficiency": round(efficiency, 3), "sitl": sitl, "load_before": load_before, "load_after": load_after, "quick": quick}  # fmt: skip
+
+
+def record_run(result_path: Path) -> dict[str, Any]:
+    """A ``rover-ctl tune`` run's own figures (its ``result.json``) as a benchmark section:
+    ``python -m bench.bench_tune record DIR/result.json`` writes ``bench/results/tune_run.json``."""
+    import json
+
+    r = json.loads(Path(result_path).read_text())
+    lines = ["| scenario | rule base | held-out worlds | success | collisions | timeouts | time (s) | path (m) | score |",
+             "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for row in r["holdout"]:
+        for label, s in (("source", row["source"]), ("tuned", row["tuned"])):
+            time_s = "-" if s["duration_s"] is None or s["duration_s"] != s["duration_s"] else f"{s['duration_s']:.1f}"
+            path_m = "-" if s["path_length_m"] is None or s["path_length_m"] != s["path_length_m"] else f"{s['path_length_m']:.1f}"
+            lines.append(f"| {row['scenario']} | {r['rulebase'] if label == 'source' else 'tuned'} | {s['episodes']} | {s['success_rate']:.0%} | "
+                         f"{s['collisions']} | {s['timeouts']} | {time_s} | {path_m} | {s['score']:.1f} |")  # fmt: skip
+    history = r["history"]
+    markdown = "\n".join(lines) + (
+        f"\n\nThe run: `{r['command']}`: {r['generations']} generations of {r['population']} candidates on "
+        f"{r['worlds']} training worlds per scenario ({r['episodes']} episodes, {r['search_sim_s']:.0f} simulated s in "
+        f"{r['search_wall_s']:.0f} wall s, {r['search_sim_s'] / r['search_wall_s']:.0f}x real time, on a 2-worker LocalCluster "
+        f"of the shared machine), then the held-out check ({r['holdout_wall_s']:.0f} wall s). Training score (mean episode "
+        f"cost, lower is better): source {r['source_score']:.1f}, best candidate {r['best']['score']:.1f} (generation "
+        f"{r['best']['generation']}); median of the last generation {history[-1]['median']:.1f}. Held-out seeds (never "
+        f"used in the search): {r['holdout_seeds']}. Figures from the in-process runner; the emulator-in-the-loop "
+        "check is the section \"Navigation: default vs tuned.toml\"."
+    )
+    result = {"title": "Tuning run (rover-ctl tune, held-out worlds, in-process runner)", "markdown": markdown,
+              "command": r["command"], "result": {k: v for k, v in r.items() if k != "holdout_runs"}}  # fmt: skip
+    return result
+
+
+if __name__ == "__main__":
+    import json
+    import platform
+    import sys
+
+    from bench.__main__ import RESULTS, write_doc
+
+    if len(sys.argv) != 3 or sys.argv[1] != "record":
+        sys.exit("usage: python -m bench.bench_tune record RUN_DIR/result.json")
+    record = record_run(Path(sys.argv[2]))
+    record["machine"] = f"{platform.machine()} python {platform.python_version()}"
+    record["date"] = time.strftime("%Y-%m-%d")
+    record["wall_s"] = record["result"]["search_wall_s"] + record["result"]["holdout_wall_s"]
+    (RESULTS / "tune_run.json").write_text(json.dumps(record, indent=2, default=float) + "\n")
+    write_doc()
