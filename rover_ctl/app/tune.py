@@ -407,6 +407,7 @@ def _plot(path: Path, history: list[dict[str, Any]]) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
     gens = [h["generation"] for h in history]
@@ -415,6 +416,7 @@ def _plot(path: Path, history: list[dict[str, Any]]) -> None:
     ax.plot(gens, [h["best_so_far"] for h in history], "-", color="k", lw=1, label="best so far")
     ax.axhline(history[0]["source"], color="grey", ls=":", label="source rule base")
     ax.set_xlabel("generation")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("score (mean episode cost, log)")
     ax.set_yscale("log")  # a collision costs 2000, a good run about 50: both on one plot
     ax.grid(alpha=0.3)
