@@ -1,4 +1,5 @@
-"""``rover-ctl tune`` end to end on a LocalCluster: two generations, resumed, the tuned file loads."""
+"""``rover-ctl tune`` end to end: a generation on its own LocalCluster, a second resumed from the
+checkpoint on an existing cluster (``--scheduler``, 127.0.0.1), the tuned file loads."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import json
 
 import psutil
 import pytest
+from distributed import LocalCluster
 
 from rover_ctl.app.tune import Cluster, TuneOptions, draw_seeds, tune
 from rover_ctl.cli import main
@@ -18,8 +20,13 @@ def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys)
                           seed=7, workers=2, command="rover-ctl tune default --scenarios moving ...")  # fmt: skip
     first = tune(options)
     assert first["generations"] == 1 and (out / "checkpoint.pkl").exists()
-    options.generations = 2  # the same run, longer: resumed from its checkpoint, generation 1 kept
-    result = tune(options)
+    # The same run, longer, resumed from its checkpoint on an existing cluster (--scheduler).
+    options.generations, options.workers = 2, None
+    with LocalCluster(n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as cluster:  # fmt: skip
+        options.scheduler = cluster.scheduler_address
+        result = tune(options)
+    assert result["history"][1]["workers"] == 1
     assert [h["generation"] for h in result["history"]] == [1, 2]
     assert result["history"][0] == first["history"][0]
     assert result["episodes"] == 2 * 2 * 1 + 1  # two candidates a generation, and the source in generation 1
