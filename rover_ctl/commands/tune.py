@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import signal
 import sys
 from pathlib import Path
 
@@ -69,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
                           workers=args.workers, scale_outputs=args.scale_outputs, config_overrides=args.set,
                           command=command_line(sys.argv[1:]))  # fmt: skip
     console = Console(stderr=True)
+    signal.signal(signal.SIGTERM, _interrupt)  # a service stop ends the run as Ctrl-C does: cluster closed, checkpoint kept
 
     def table(p: Progress) -> Table:
         t = Table(title=f"rover-ctl tune {args.rulebase}", show_header=False)
@@ -90,6 +92,10 @@ def run(args: argparse.Namespace) -> int:
                       f"score {s['score']:.1f} -> {t['score']:.1f}")  # fmt: skip
     console.print(f"tuned rule base: {out / 'tuned.toml'} (use with --rulebase); report: {out / 'report.md'}")
     return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def _num(value: float, spec: str) -> str:
