@@ -209,7 +209,7 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
         "for a near target, so it slows to a crawl as it closes in and rarely gets inside the 0.5 m "
         "acceptance radius within the time budget, even in the open field."
     )
-    markdown += (
+    markdown += "" if rulebase else (
         f"\n\ndefault+predict: the default rule base with obstacle tracks and prediction "
         f"(`proximity.horizon_s={PREDICT_HORIZON_S:g}`, docs/perception.md). Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
