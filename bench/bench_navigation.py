@@ -1,7 +1,7 @@
 """Navigation benchmark: seeded worlds driven end to end (emulator + daemon in lockstep), per rule base.
 
 Scenarios: ``rover_ctl.tuning.scenarios`` (open, scattered, walls, cul_de_sac, moving, crossing,
-head_on, overtaking; all at ArduPilot's CMAC field, shared with ``rover-ctl tune``; the daemon is
+head_on, overtaking, narrow_gap, dense_clutter; all at ArduPilot's CMAC field, shared with ``rover-ctl tune``; the daemon is
 never told where the obstacles are, it sees them only with its rangefinders).
 
 Variants: the rule bases ``paper`` and ``default`` (the daemon as shipped: yielding to crossing
@@ -133,8 +133,10 @@ def _mean(values: list[float]) -> float:
     return statistics.fmean(values) if values else math.nan
 
 
-FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100, "head_on": 100, "overtaking": 100}
-QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2, "head_on": 1, "overtaking": 1}
+FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100, "head_on": 100, "overtaking": 100,
+               "narrow_gap": 100, "dense_clutter": 100}  # fmt: skip
+QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2, "head_on": 1, "overtaking": 1,
+                "narrow_gap": 1, "dense_clutter": 1}  # fmt: skip
 PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 

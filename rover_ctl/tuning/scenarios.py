@@ -17,6 +17,10 @@ The daemon is never told where the obstacles are: it sees them only with its ran
 * ``overtaking``: one pedestrian walking up the leg ahead of the rover at 0.3-0.6 m/s, starting
   4-8 m out within 0.4 m of the line: the rover has to pass it.
 
+* ``narrow_gap``: a 16 m wall across a 30 m leg with one opening 1.5 times the rover's width,
+  its centre up to 2 m off the leg (seeded).
+* ``dense_clutter``: 30 drums (radius 0.2-0.5 m, >= 1.2 m apart) within 3 m of a 50 m leg (seeded).
+
 The moving obstacles of ``crossing``, ``head_on`` and ``overtaking`` start moving when the rover
 arms (world file ``"start": "armed"``, ``"start"`` in their dicts), so the encounter does not
 depend on how long the ground station took to upload and arm.
@@ -29,6 +33,7 @@ import random
 from dataclasses import dataclass, field
 from typing import Any
 
+from rover_ctl.config import RobotParams
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
 from rover_ctl.vocabulary import Cmd
@@ -66,6 +71,30 @@ def _wall(a: EN, b: EN, thickness_m: float = 0.3) -> list[EN]:
     length = math.dist(a, b)
     nx, ny = -(by - ay) / length * thickness_m / 2, (bx - ax) / length * thickness_m / 2
     return [(ax + nx, ay + ny), (bx + nx, by + ny), (bx - nx, by - ny), (ax - nx, ay - ny)]
+
+
+NARROW_GAP_WIDTH_M = 1.5 * RobotParams.footprint_width_m
+"""narrow_gap: the opening, 1.5 times the rover's width (issue 12)."""
+
+
+def _narrow_gap(seed: int) -> list[list[EN]]:
+    """A wall across the 30 m leg at 15 m, 16 m long, with one opening of ``NARROW_GAP_WIDTH_M``
+    whose centre lies up to 2 m either side of the leg (seeded)."""
+    centre = random.Random(seed * 7919 + 12).uniform(-2.0, 2.0)
+    half = NARROW_GAP_WIDTH_M / 2.0
+    return [_wall((-8.0, 15.0), (centre - half, 15.0)), _wall((centre + half, 15.0), (8.0, 15.0))]
+
+
+def _dense_clutter(seed: int, count: int = 30) -> list[tuple[EN, float]]:
+    """``count`` drums (radius 0.2-0.5 m) along a 50 m leg, within 3 m of it, none on the first or
+    last 3 m, at least 1.2 m apart edge to edge (seeded)."""
+    rng = random.Random(seed * 104729 + 30)
+    drums: list[tuple[EN, float]] = []
+    while len(drums) < count:
+        centre, radius = (rng.uniform(-3.0, 3.0), rng.uniform(3.0, 47.0)), rng.uniform(0.2, 0.5)
+        if all(math.dist(centre, c) - r - radius >= 1.2 for c, r in drums):
+            drums.append((centre, radius))
+    return drums
 
 
 def _arrival_s(distance_m: float) -> float:
@@ -116,6 +145,8 @@ def scenarios(seed: int) -> dict[str, Scenario]:
         "crossing": Scenario("crossing", two_legs, moving=crossing),
         "head_on": Scenario("head_on", [(0.0, 0.0), (0.0, 30.0)], moving=head_on),
         "overtaking": Scenario("overtaking", [(0.0, 0.0), (0.0, 30.0)], moving=overtaking),
+        "narrow_gap": Scenario("narrow_gap", [(0.0, 0.0), (0.0, 30.0)], polygons=_narrow_gap(seed)),
+        "dense_clutter": Scenario("dense_clutter", [(0.0, 0.0), (0.0, 50.0)], circles=_dense_clutter(seed)),
     }
 
 
