@@ -501,6 +501,9 @@ class YieldParams:
     min_travel_m: float = 0.6
     """...and only once it has gone this far from its first echo (m): an echo sliding over a static
     drum's face moves up to about its radius; 1.6 s of a pedestrian at 0.5 m/s."""
+    max_heading_off_deg: float = 30.0
+    """No new yield starts while the rover's heading is more than this off its course to the
+    target (deg): it is turning around something, and its tracks' velocities are unreliable."""
     max_wait_s: float = 10.0
     """Longest an obstacle yielded to is still waited for after its track was lost (s): meanwhile
     it is taken to move on at its last velocity."""

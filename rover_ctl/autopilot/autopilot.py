@@ -524,7 +524,7 @@ class Autopilot:
             tracks = self.proximity.tracker.moving(t_s, rover_velocity)
             course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
             alive = {track.ident for track in self.proximity.tracker.tracks}
-            yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive)
+            yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive, pose.heading_rad)
             if yielded.speed_limit_mps is not None:
                 speed_mps = yielded.speed_limit_mps
                 row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)

@@ -29,7 +29,10 @@ walker coming head-on must not read as crossing), and only tracks the tracker is
 least ``min_hits`` echoes, a velocity standard deviation of at most ``max_speed_sd_mps``, and
 ``min_travel_m`` travelled since its first echo. As the rover drives past or turns by a static
 obstacle its echo slides over the obstacle's face and makes tracks that seem to move; they never
-get far from where they started. An obstacle walking along the rover's line (ahead, slower: to be overtaken;
+get far from where they started. And no new yield starts while the rover points more than
+``max_heading_off_deg`` away from its course (in the middle of a turn around something): the
+model above has it going along the course, and a turning rover's beams sweep over surfaces and
+give its tracks velocities that are not there. An obstacle walking along the rover's line (ahead, slower: to be overtaken;
 towards it: head-on) is steered around like a static one; waiting behind it would never end.
 
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
@@ -84,11 +87,13 @@ class Yielder:
         """Tracks yielded to: the last estimate of each (a copy), kept while it is in conflict."""
 
     def limit(self, east_m: float, north_m: float, course_rad: float, speed_mps: float,
-              tracks: Iterable[Track], time_s: float, alive: Collection[int] = ()) -> YieldDecision:  # fmt: skip
+              tracks: Iterable[Track], time_s: float, alive: Collection[int] = (),
+              heading_rad: float | None = None) -> YieldDecision:  # fmt: skip
         """The speed cap for a rover at (``east_m``, ``north_m``) going along ``course_rad`` (ENU,
         towards its target) at ``speed_mps``, among the moving ``tracks``; ``alive`` names every
         track the tracker still has, moving or not (one that stopped moving is no longer waited for;
-        one that is gone is, as last seen)."""
+        one that is gone is, as last seen). ``heading_rad``: where the rover points; no new yield
+        starts while it is more than ``max_heading_off_deg`` off the course."""
         p = self.params
         if not p.enabled or speed_mps <= 0.0:
             self._yielding.clear()
@@ -100,6 +105,7 @@ class Yielder:
         ue, un = math.cos(course_rad), math.sin(course_rad)
         radius_m = self._robot_radius_m() + p.margin_m
         min_share = math.sin(math.radians(p.min_cross_deg))
+        off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(p.max_heading_off_deg)
         half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
         crossing = []
         for ident, track in candidates.items():
@@ -108,7 +114,7 @@ class Yielder:
             if ident in self._yielding:  # already yielded to: kept while it still crosses at half the angle
                 if ident in live and across_mps < half_share * track.speed_mps:
                     continue
-            elif (across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
+            elif (off_course or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
                   or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
                 continue
             crossing.append((ident, e - east_m, n - north_m, track.v_east_mps, track.v_north_mps))

@@ -216,7 +216,7 @@ def ex_yielding(d: Daemon) -> list:
             t = k * 0.1
             hits, vv = (5 + k, 0.3 / (1 + k)) if k < 40 or ve < 0.5 else (0, 0.0)
             tracks = [Track(1, t, -2.5 + ve * t, 3.5 + vn * t, ve, vn, vv=vv, hits=hits, born_en=(-2.5 - 4.0 * ve, 3.5))] if hits else []
-            decision = yielder.limit(0.0, north, math.pi / 2, speed_limit, tracks, t)
+            decision = yielder.limit(0.0, north, math.pi / 2, speed_limit, tracks, t, heading_rad=math.pi / 2 - 0.01 * k)
             speed = speed_limit if decision.speed_limit_mps is None else decision.speed_limit_mps
             north += speed * 0.1
             trace.append((decision.speed_limit_mps, decision.track_ident))

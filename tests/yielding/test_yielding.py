@@ -105,6 +105,16 @@ def test_unsure_tracks_are_not_yielded_to():
     assert yielder().limit(0.0, 0.0, NORTH, 1.2, [wandering], 0.0).speed_limit_mps is None
 
 
+def test_no_new_yield_while_the_rover_points_off_its_course():
+    """Mid-turn around something (heading 40 degrees off the course): its tracks' velocities are
+    swept echoes, so no yield starts; once one has started it holds through a turn."""
+    track = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
+    y = yielder()
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(10.0)).speed_limit_mps is not None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.05, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is not None
+
+
 def test_disabled_or_standing_still_no_limit():
     track = crossing(3.0)
     assert yielder(enabled=False).limit(0.0, 0.0, NORTH, 1.2, [track], 3.0).speed_limit_mps is None
