@@ -521,12 +521,14 @@ class Daemon:
     def _check_silence(self) -> None:
         """Nothing at all from the vehicle (not even lockstep markers, which would drive the
         control step and its failsafe in vehicle time): step the autopilot on the wall clock, at
-        most once a control period, so that its vehicle-link failsafe sends neutral."""
+        most once a control period, so that its vehicle-link failsafe sends neutral. In lockstep
+        only after ``daemon.lockstep_silence_s``: a starved emulator is paused, not gone."""
         link = self.link
         if link.last_rx_wall_s is None:
             return
         age_s = time.monotonic() - max(link.last_rx_wall_s, self._marker_wall_s)
-        if age_s <= self.config.failsafe.vehicle_timeout_s or time.monotonic() < self._silent_neutral_wall_s:
+        timeout_s = self.config.daemon.lockstep_silence_s if self.lockstep else self.config.failsafe.vehicle_timeout_s
+        if age_s <= timeout_s or time.monotonic() < self._silent_neutral_wall_s:
             return
         self._silent_neutral_wall_s = time.monotonic() + self.period_s
         t_s = link.vehicle_time_s + age_s
