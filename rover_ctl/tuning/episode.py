@@ -45,6 +45,7 @@ import numpy as np
 
 from rover_ctl.autopilot.autopilot import RELEASE, Autopilot, Readings
 from rover_ctl.autopilot.events import ArmRequest, MissionComplete, ModeChanged
+from rover_ctl.autopilot.loop_rate import ControlTicks
 from rover_ctl.config import Config, load_config
 from rover_ctl.estimation.estimator import Pose, PoseEstimator
 from rover_ctl.estimation.frame import LocalFrame
@@ -150,7 +151,7 @@ class Episode:
         self.last_fix_s: float | None = None
         self.rates_hz = {"ATTITUDE": params.imu.rate_hz, "WHEEL_DISTANCE": params.encoder.rate_hz}
         self.period_s = 1.0 / self.config.daemon.control_rate_hz
-        self.next_tick_s: float | None = None
+        self.ticks = ControlTicks(lambda: self.period_s)
         self.arm_sent = False
         self.vehicle_armed_seen = False
         self.auto_start_s: float | None = None
@@ -276,13 +277,8 @@ class Episode:
 
     def _maybe_step(self, t_s: float) -> None:
         """``Daemon._maybe_step`` and ``control_step``: a step when vehicle time reaches the tick."""
-        if self.next_tick_s is None:
-            self.next_tick_s = t_s
-        if t_s + 1e-9 < self.next_tick_s:
+        if not self.ticks.due(t_s):
             return
-        self.next_tick_s += self.period_s
-        if self.next_tick_s <= t_s:
-            self.next_tick_s = t_s + self.period_s
         readings = Readings(ranges=dict(self.ranges), vehicle_age_s=0.0, gcs_age_s=0.0,
                             gps_age_s=math.inf if self.last_fix_s is None else max(0.0, t_s - self.last_fix_s),
                             sensor_rates_hz=self.rates_hz, odometry_planned_hz=self.rates_hz["WHEEL_DISTANCE"])  # fmt: skip
