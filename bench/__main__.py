@@ -6,7 +6,8 @@ Each benchmark is a module ``bench/bench_<name>.py`` with ``run(quick: bool) -> 
 order. ``python -m bench [NAME ...] [--quick]`` runs some or all of them; sections of benchmarks not
 run this time are kept from their last JSON. ``python -m bench navigation --only crossing,moving
 --worlds 10`` runs some scenarios of the navigation benchmark on fewer worlds (its other rows are
-kept from the last run, each row dated); ``--rulebase FILE`` compares a rule base file (a
+kept from the last run, each row dated); ``--variants paper,default`` runs only those variants
+(likewise keeping the other rows); ``--rulebase FILE`` compares a rule base file (a
 ``rover-ctl tune`` result) with default in a table of its own (``navigation_rulebase.json``).
 """
 

@@ -20,30 +20,32 @@ and the rover is in conflict with the track when ``|d(tau*)| < R``, ``R = robot 
 margin_m`` (the track is an echo on the obstacle's near surface, so its own size is not added).
 The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that is in
 conflict with no track; ``None`` (no limit) when full speed is. When every fraction is in conflict
-(an obstacle whose estimated course would reach even a stopped rover), the one that keeps it
-farthest away: driving on at full speed into a crossing obstacle's path is never the answer.
+(an obstacle whose estimated course would reach even a stopped rover), the fraction that keeps it
+farthest away: full speed only when that is the one (passing well ahead of it), never by default.
 
 Only tracks that *cross* are yielded to: the component of ``w`` across ``u`` of at least
 ``min_cross_mps`` and at least ``sin(min_cross_deg)`` of its speed (a track's velocity is noisy: a
-walker coming head-on must not read as crossing), and only tracks the tracker is sure of: at
-least ``min_hits`` echoes, a velocity standard deviation of at most ``max_speed_sd_mps``, and
-``min_travel_m`` travelled since its first echo. As the rover drives past or turns by a static
-obstacle its echo slides over the obstacle's face and makes tracks that seem to move; they never
-get far from where they started. And no new yield starts while the rover points more than
-``max_heading_off_deg`` away from its course (in the middle of a turn around something): the
-model above has it going along the course, and a turning rover's beams sweep over surfaces and
-give its tracks velocities that are not there. An obstacle walking along the rover's line (ahead, slower: to be overtaken;
-towards it: head-on) is steered around like a static one; waiting behind it would never end.
+walker coming head-on must not read as crossing). An obstacle walking along the rover's line
+(ahead and slower: to be overtaken; towards it: head-on) is steered around like a static one:
+waiting behind it would never end, and one walking at a stopped rover walks into it.
+
+Only tracks the tracker is sure of start a yield: at least ``min_hits`` echoes, a velocity
+standard deviation of at most ``max_speed_sd_mps``, and ``min_travel_m`` travelled since the first
+echo (as the rover drives past or turns by a static obstacle its echo slides over the obstacle's
+face and makes tracks that seem to move, but never far from where they started). And none starts
+while the rover points more than ``max_heading_off_deg`` away from its course (mid-turn around
+something): the model has it going along the course, and a turning rover's beams sweep over
+surfaces and give its tracks velocities that are not there.
 
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
 full speed clears it by ``release_margin_m`` more, or its course comes within half of
 ``min_cross_deg`` of the line (the maturity tests no longer apply), so that track noise does not
-make the rover lurch.
-A yielded-to obstacle often loses its track while it passes (its echo jumps across its surface as
-it moves from one beam to the next, beyond the tracker's gate, and a new track starts with no
-velocity). So the last estimate of every track yielded to is kept, and while its track is gone
-(not merely no longer moving: that one is static now, and released) it stands in for it, moving on at its last velocity, for at most ``max_wait_s``: the rover waits
-until that obstacle has passed, not until it was lost.
+make the rover lurch. A yielded-to obstacle often loses its track while it passes (its echo jumps
+across its surface from one beam to the next, beyond the tracker's gate, and a new track starts
+with no velocity). So the last estimate of every track yielded to is kept, and while its track is
+gone (not merely no longer moving: that one is static now, and released) it stands in for it,
+moving on at its last velocity, for at most ``max_wait_s``: the rover waits until that obstacle
+has passed, not until it was lost.
 """
 
 from __future__ import annotations
