@@ -26,7 +26,12 @@ from rover_ctl.tuning.scenarios import scenarios
 from rover_ctl.vocabulary import RoverMode
 
 PATH_TOLERANCE = 0.05
-TIME_TOLERANCE = 0.10
+TIME_TOLERANCE = 0.20
+"""Since yielding is on by default, a rover passing static drums now and then yields to an echo
+sliding over one (docs/perception.md) and stands for a few seconds; when it does depends on GPS
+noise, which differs between the two runs (the SITL run arms on the wall clock). Scattered seed 3
+took 60.2 s in the runner against 69.4 s in SITL once, with the same path within 5%; before
+yielding the two agreed within 1%."""
 
 
 @pytest.mark.sitl
