@@ -8,7 +8,9 @@ run this time are kept from their last JSON. ``python -m bench navigation --only
 --worlds 10`` runs some scenarios of the navigation benchmark on fewer worlds (its other rows are
 kept from the last run, each row dated); ``--variants paper,default`` runs only those variants
 (likewise keeping the other rows); ``--rulebase FILE`` compares a rule base file (a
-``rover-ctl tune`` result) with default in a table of its own (``navigation_rulebase.json``).
+``rover-ctl tune`` result) with default in a table of its own (``navigation_rulebase.json``);
+``--scheduler tcp://HOST:8786`` runs the worlds as tasks on a Dask cluster whose workers run from
+a checkout of this tree (docs/tuning.md, "On a cluster").
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worlds", type=int, metavar="N", help="navigation: N seeded worlds per scenario instead of the full counts")
     parser.add_argument("--variants", metavar="NAME,...", help="navigation: run only these variants (rule base + settings; the other rows are kept)")
     parser.add_argument("--rulebase", metavar="FILE", help="navigation: this rule base file against default, in a table of its own")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="navigation: run the worlds as tasks on this Dask cluster (tcp://HOST:8786)")
     args = parser.parse_args(argv)
     names = args.names or available()
     unknown = sorted(set(names) - set(available()))
@@ -48,9 +51,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"== bench {name}", flush=True)
         started = time.perf_counter()
         options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds),
-                                     ("variants", args.variants and args.variants.split(",")), ("rulebase", args.rulebase)) if v}  # fmt: skip
+                                     ("variants", args.variants and args.variants.split(",")), ("rulebase", args.rulebase),
+                                     ("scheduler", args.scheduler)) if v}  # fmt: skip
         if options and name != "navigation":
-            parser.error(f"--only, --worlds, --variants and --rulebase apply to the navigation benchmark, not {name}")
+            parser.error(f"--only, --worlds, --variants, --rulebase and --scheduler apply to the navigation benchmark, not {name}")
         module = importlib.import_module(f"bench.bench_{name}")
         unknown = sorted(set(options.get("only", ())) - set(getattr(module, "FULL_WORLDS", ())))
         if unknown:
@@ -58,7 +62,10 @@ def main(argv: list[str] | None = None) -> int:
         unknown = sorted(set(options.get("variants", ())) - set(getattr(module, "VARIANTS", ())))
         if unknown:
             parser.error(f"unknown variant(s) {', '.join(unknown)} (known: {', '.join(module.VARIANTS)})")
-        result = module.run(quick=args.quick, **options)
+        try:
+            result = module.run(quick=args.quick, **options)
+        except ValueError as exc:  # a bad --rulebase file, an unreachable --scheduler
+            parser.error(str(exc))
         result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
         result.setdefault("date", time.strftime("%Y-%m-%d"))
         result["wall_s"] = round(time.perf_counter() - started, 1)

@@ -141,12 +141,43 @@ PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 
 
+def remote_run(name: str, variant: str, seed: int, variants: dict[str, tuple[str | None, list[str], str | None]]) -> dict[str, Any]:
+    """One run as a Dask task, on a worker of ``--scheduler``: in a folder of its own there, the
+    rule base files shipped as text (``(rule base, overrides, file text or None)`` per variant);
+    only the figures come back (the run folder goes with the task)."""
+    with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp:
+        local = {}
+        for key, (rulebase, overrides, text) in variants.items():
+            if text is not None:
+                rulebase = str(Path(tmp) / f"{key.replace('/', '_')}.rulebase.toml")
+                Path(rulebase).write_text(text, encoding="utf-8")
+            local[key] = (rulebase, overrides)
+        return one_run(name, variant, seed, Path(tmp), local)
+
+
+def _on_cluster(scheduler: str, jobs: list[tuple[str, str, int]], variants: dict) -> list[dict[str, Any]]:
+    """The runs as tasks on an existing Dask cluster (workers run from a checkout of this tree:
+    ``remote_run`` is imported there by name), results in job order."""
+    from distributed import Client
+
+    shipped = {key: (rulebase, list(overrides), Path(rulebase).read_text(encoding="utf-8") if rulebase and Path(rulebase).is_file() else None)
+               for key, (rulebase, overrides) in variants.items()}  # fmt: skip
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise ValueError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
+    with client:
+        futures = [client.submit(remote_run, name, variant, seed, shipped, pure=False) for name, variant, seed in jobs]
+        return client.gather(futures)
+
+
 def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, rulebase: str | None = None,
-        variants: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
+        variants: list[str] | None = None, scheduler: str | None = None) -> dict[str, Any]:  # fmt: skip
     """All scenarios and variants, or ``only`` these scenarios and ``variants`` (the other rows
     kept from the last run), on ``worlds`` seeded worlds each instead of the default counts. ``rulebase``: a
     rule base file (a ``rover-ctl tune`` result) against ``default`` instead of the variants, in
-    a table of its own (``bench/results/navigation_rulebase.json``)."""
+    a table of its own (``bench/results/navigation_rulebase.json``). ``scheduler``: run the worlds
+    as tasks on the Dask cluster at this address instead of ``WORKERS`` at a time here."""
     chosen = variants
     variants = {name: VARIANTS[name] for name in VARIANTS if not chosen or name in chosen}
     if rulebase:
@@ -163,8 +194,11 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
     if worlds:
         counts = {name: worlds for name in counts}
     jobs = [(name, variant, seed) for name, count in counts.items() for variant in variants for seed in range(1, count + 1)]
-    with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
-        runs = list(pool.map(lambda job: one_run(*job, Path(tmp), variants), jobs))
+    if scheduler:
+        runs = _on_cluster(scheduler, jobs, variants)
+    else:
+        with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
+            runs = list(pool.map(lambda job: one_run(*job, Path(tmp), variants), jobs))
     today = time.strftime("%Y-%m-%d")
     fresh = []
     for name in counts:
