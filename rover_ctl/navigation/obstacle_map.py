@@ -65,7 +65,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Collection
+from collections.abc import Collection
 
 import numpy as np
 import shapely
@@ -199,7 +199,9 @@ class ObstacleMap:
         shapes: list[tuple[float, Polygon]] = []
         for cluster in clusters:
             keys = np.array(sorted(cluster), dtype=float)
-            boxes = shapely.box(keys[:, 0] * cell - grow, keys[:, 1] * cell - grow, (keys[:, 0] + 1) * cell + grow, (keys[:, 1] + 1) * cell + grow)
+            boxes = shapely.box(
+                keys[:, 0] * cell - grow, keys[:, 1] * cell - grow, (keys[:, 0] + 1) * cell + grow, (keys[:, 1] + 1) * cell + grow
+            )
             merged = unary_union(boxes).simplify(p.simplify_m, preserve_topology=True)
             for part in getattr(merged, "geoms", [merged]):
                 if isinstance(part, Polygon) and not part.is_empty:
