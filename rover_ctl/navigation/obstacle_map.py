@@ -64,8 +64,8 @@ leave no way to the goal, the path follower plans without them (``PathFollower``
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Collection
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
