@@ -534,7 +534,7 @@ class ObstacleMapParams:
     """Persistent obstacles (``rover_ctl.navigation.obstacle_map``): places the rangefinders echo
     from repeatedly, folded into the planner's map so that it plans around them."""
 
-    enabled: bool = False
+    enabled: bool = True
     """Fold persistent obstacles into the planner's map (off: the planner knows only fences,
     known obstacles and the circles of a stuck rover)."""
     cell_m: float = 0.5
