@@ -530,6 +530,46 @@ class AutopilotParams:
 
 
 @dataclass
+class ObstacleMapParams:
+    """Persistent obstacles (``rover_ctl.navigation.obstacle_map``): places the rangefinders echo
+    from repeatedly, folded into the planner's map so that it plans around them."""
+
+    enabled: bool = True
+    """Fold persistent obstacles into the planner's map (off: the planner knows only fences,
+    known obstacles and the circles of a stuck rover)."""
+    cell_m: float = 0.5
+    """Side of a grid cell (m): the resolution of the persistent obstacles."""
+    miss_score: float = 0.5
+    """Evidence a cell loses each time a beam passes through it (an echo in it adds 1)."""
+    max_score: float = 20.0
+    """Most evidence a cell holds (one second of a rangefinder staring at it at 20 Hz), so that
+    free space seen later clears it in a bounded time."""
+    persist_score: float = 6.0
+    """A cell is persistent with at least this much evidence..."""
+    min_span_s: float = 1.5
+    """...and echoes spanning at least this long (s): a crossing pedestrian passes a cell in less."""
+    ttl_s: float = 60.0
+    """A cell with no echo for this long is forgotten (s), as AP_OADatabase's OA_DB_EXPIRE."""
+    max_cells: int = 5000
+    """Cells kept at most (the least recently hit go first): bounds memory and the update's cost."""
+    update_period_s: float = 0.5
+    """The queued readings are folded into the grid this often (s), not at every control step."""
+    min_change_cells: int = 2
+    """The planner gets new persistent obstacles only when at least this many cells became or
+    stopped being persistent..."""
+    rebuild_min_interval_s: float = 2.0
+    """...and at most once per this interval (s): each hand-over rebuilds the visibility graph."""
+    max_obstacles: int = 16
+    """Clusters handed to the planner at most, the nearest to the rover first."""
+    simplify_m: float = 0.25
+    """Tolerance (m) of the simplification of a cluster's outline (a diagonal staircase of cells
+    becomes a straight side)."""
+    margin_m: float = 0.2
+    """The planner keeps the robot's half-width plus this (m) from a persistent obstacle; less
+    than ``planner.clearance_margin_m`` because a cell already reaches beyond its echoes."""
+
+
+@dataclass
 class Config:
     """All sections. Add a section by adding a dataclass field here (and its numeric fields to the
     parameter table, ``rover_ctl.parameters``)."""
@@ -547,6 +587,7 @@ class Config:
     proximity: ProximityParams = field(default_factory=ProximityParams)
     yielding: YieldParams = field(default_factory=YieldParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
+    obstacle_map: ObstacleMapParams = field(default_factory=ObstacleMapParams)
     command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)
     """``section.field`` keys given with ``--set``: they win over values persisted from a ground station."""
 

@@ -6,7 +6,7 @@ has one: WP_RADIUS, WP_SPEED, RTL_SPEED, FS_GCS_TIMEOUT, FS_ACTION, FENCE_ACTION
 WENC_RADIUS, SCHED_LOOP_RATE; otherwise one prefix per section: ``RBT_`` robot, ``LINK_`` vehicle
 link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
 ``WHL_`` wheel control, ``DMN_`` control loop, ``GCS_`` ground-station link, ``NAV_`` navigator,
-``PRX_`` obstacle memory, ``YLD_`` yielding, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
+``PRX_`` obstacle memory, ``YLD_`` yielding, ``OMAP_`` persistent obstacles, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
 default is the dataclass default and the description is the field's docstring in config.py, so
 neither is written twice.
 
@@ -387,6 +387,20 @@ _DECLARED: tuple[tuple, ...] = (
     ("yielding.max_heading_off_deg", "YLD_MAX_HDG_OFF", 0.0, 180.0, RW, {"units": "deg"}),
     ("yielding.max_wait_s", "YLD_MAX_WAIT", 0.0, 120.0, RW, {}),
     ("yielding.speed_steps", "YLD_SPD_STEPS", 1, 20, RW, {}),
+    ("obstacle_map.enabled", "OMAP_ENABLE", 0, 1, RW, {}),
+    ("obstacle_map.cell_m", "OMAP_CELL", 0.05, 5.0, RW, {}),
+    ("obstacle_map.miss_score", "OMAP_MISS", 0.0, 100.0, RW, {}),
+    ("obstacle_map.max_score", "OMAP_MAX_SCORE", 1.0, 1000.0, RW, {}),
+    ("obstacle_map.persist_score", "OMAP_PERSIST", 1.0, 1000.0, RW, {}),
+    ("obstacle_map.min_span_s", "OMAP_MIN_SPAN", 0.0, 600.0, RW, {}),
+    ("obstacle_map.ttl_s", "OMAP_TTL", 0.1, 86400.0, RW, {}),
+    ("obstacle_map.max_cells", "OMAP_MAX_CELLS", 1, 100000, RW, {}),
+    ("obstacle_map.update_period_s", "OMAP_UPD_PERIOD", 0.02, 60.0, RW, {}),
+    ("obstacle_map.min_change_cells", "OMAP_MIN_CHANGE", 1, 1000, RW, {}),
+    ("obstacle_map.rebuild_min_interval_s", "OMAP_REBUILD_INT", 0.0, 600.0, RW, {}),
+    ("obstacle_map.max_obstacles", "OMAP_MAX_OBST", 1, 1000, RW, {}),
+    ("obstacle_map.simplify_m", "OMAP_SIMPLIFY", 0.0, 5.0, RW, {}),
+    ("obstacle_map.margin_m", "OMAP_MARGIN", 0.0, 10.0, RW, {}),
 )
 CONFIG_ONLY = frozenset({"link.vehicle_url", "link.gcs_url", "gcs.mission_store_path", "daemon.log_dir", "gcs.signing_key_path"})
 """Text fields: config file and command line only, never parameters."""

@@ -53,6 +53,7 @@ from rover_ctl.estimation.wheel_map import WheelMapCheck
 from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.navigation.navigator import Navigator
+from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.yielding import Yielder
@@ -68,6 +69,7 @@ LOG_COLUMNS = (
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "latency_ms",
+    "map_obstacles",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
@@ -153,6 +155,10 @@ class Autopilot:
         self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m,
                                         tracking=lambda: config.yielding.enabled)  # fmt: skip
         self.yielder = Yielder(config.yielding, lambda: math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0)
+        self.obstacle_map = ObstacleMap(config.obstacle_map)
+        self._map_updated_s = self._map_handed_s = -math.inf
+        self._map_obstacles: tuple = ()  # the persistent obstacles handed to the planner
+        self._map_moving: set[int] = set()  # tracks yielded to since the last map update
         self.mode = RoverMode.HOLD
         self.armed = False
         self.home: Home | None = None
@@ -498,6 +504,7 @@ class Autopilot:
             rpm = -self._speed_to_rpm(self.config.failsafe.back_off_speed_mps)
             row.update(left_set_rpm=rpm, right_set_rpm=rpm)
             return self.wheels.step(t_s, dt_s, rpm, rpm)
+        self._update_obstacle_map(t_s, pose, row)
         guidance = self.follower.update(t_s, (pose.east_m, pose.north_m), goal)
         if guidance.replanned and guidance.path is not None and guidance.path.ok:
             self._outbox.append(PlanMade(goal_seq, guidance.path.length_m, tuple(guidance.path.points)))
@@ -508,7 +515,10 @@ class Autopilot:
         for orientation, reading in self._ranges.items():
             if reading.time_s > self._remembered_s.get(orientation, -math.inf):
                 self._remembered_s[orientation] = reading.time_s
-                self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
+                ident = self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
+                if self.config.obstacle_map.enabled:
+                    sensor = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
+                    self.obstacle_map.add(reading.time_s, *sensor, reading.range_m, reading.max_range_m, ident)
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()},
                                        pose.speed_mps)  # fmt: skip
         for orientation in decision.blocked_orientations:
@@ -527,6 +537,7 @@ class Autopilot:
             yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive, pose.heading_rad)
             if yielded.speed_limit_mps is not None:
                 speed_mps = yielded.speed_limit_mps
+                self._map_moving.add(yielded.track_ident)  # crossing traffic: never a persistent obstacle
                 row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip
@@ -534,6 +545,30 @@ class Autopilot:
         row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
         return self.wheels.step(t_s, dt_s, nav.left_rpm, nav.right_rpm)
+
+    def _update_obstacle_map(self, t_s: float, pose: Pose, row: dict[str, Any]) -> None:
+        """Every ``update_period_s``: the queued readings into the persistent-obstacle map, and
+        its obstacles to the planner when enough changed and the last rebuild is old enough."""
+        p = self.config.obstacle_map
+        if not p.enabled:
+            if self._map_obstacles:  # switched off: the planner forgets them
+                self._map_obstacles = ()
+                self.follower.set_persistent(())
+            return
+        row.update(map_obstacles=len(self._map_obstacles))
+        if t_s - self._map_updated_s < p.update_period_s:
+            return
+        self._map_updated_s = t_s
+        robot = self.config.robot
+        position = (pose.east_m, pose.north_m)
+        changed = self.obstacle_map.update(t_s, position, math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0,
+                                           self._map_moving)  # fmt: skip
+        self._map_moving = set()
+        if changed >= p.min_change_cells and t_s - self._map_handed_s >= p.rebuild_min_interval_s:
+            self._map_handed_s = t_s
+            self._map_obstacles = self.obstacle_map.obstacles(position)
+            self.follower.set_persistent(self._map_obstacles)
+            row.update(map_obstacles=len(self._map_obstacles))
 
     def _speed_to_rpm(self, speed_mps: float) -> float:
         return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0
@@ -588,8 +623,10 @@ class Autopilot:
             if ignored:
                 self.fence_error = ignored[0] + (f" (and {len(ignored) - 1} more)" if len(ignored) > 1 else "")
                 self._say(f"Fence part ignored: {self.fence_error}", Severity.WARNING)
-        self.planner = Planner(cfg.planner, cfg.robot, fence=self.fence)
+        self.planner = Planner(cfg.planner, cfg.robot, fence=self.fence, persistent_margin_m=lambda: cfg.obstacle_map.margin_m)
         self.follower = PathFollower(self.planner, cfg.planner)
+        if self._map_obstacles:
+            self.follower.set_persistent(self._map_obstacles)
         self.executor = MissionExecutor(self.mission.items, to_enu, cfg.executor, lambda: cfg.robot.max_speed_mps)
         waypoints = tuple(tuple(map(float, to_enu(i.x, i.y))) for i in self.mission.items
                           if i.command in NAV_COMMANDS and i.is_global and (i.x or i.y))  # fmt: skip

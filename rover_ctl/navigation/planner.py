@@ -20,6 +20,12 @@ still produce staircase paths. The static graph is built once and rebuilt only w
 obstacles change or the clearance or ``circle_segments`` parameters did (checked at each query,
 so a changed parameter applies to the next plan); a query adds the start and goal.
 
+Persistent obstacles (polygons of places the rangefinders echo from repeatedly,
+``rover_ctl.navigation.obstacle_map``) are a fourth kind, replaced as a whole by
+``set_persistent``. They are inflated by ``robot.footprint_width_m / 2 + persistent_margin_m``
+(their cells already reach beyond the echoes), and they never make a goal unreachable by
+themselves: a goal inside one is treated as one in the clearance band.
+
 Circles become regular ``PlannerParams.circle_segments``-gons that circumscribe the inflated
 circle, and polygon corners are rounded with the chord error compensated, so the polygonal
 approximation never cuts into the clearance. Graph nodes sit ``NODE_OFFSET_M`` further out than
@@ -38,12 +44,15 @@ API:
       .plan_route(start_en, goals_en) -> Path     the legs joined (for the planned-path plot)
       .is_inside_fence(point_en) -> bool          fence breach test (raw fence, no clearance)
       .block(now_s, center_en, radius_m=None)     temporary circular obstacle (a blocked leg)
+      .set_persistent(polygons) -> bool           replace the persistent obstacles (True: changed)
+      .near_persistent(path, s_from_m) -> bool    the path beyond s_from_m would touch one
       .expire(now_s) -> bool                      forget blocked circles older than blocked_ttl_s
     Path.project(point_en, s_min_m=0, s_max_m=inf) -> (s_m, cross_track_m)
     Path.point_at(s_m) -> (east_m, north_m);  Path.carrot(point_en, lookahead_m)
     PathFollower(planner, params).update(now_s, position_en, goal_en) -> Guidance
       Guidance.target_en (the carrot, None when there is no path), cross_track_m, remaining_m,
-      replanned, error;  PathFollower.block(now_s, center_en) re-plans around a blocked leg.
+      replanned, error;  PathFollower.block(now_s, center_en) re-plans around a blocked leg;
+      PathFollower.set_persistent(polygons) re-plans only if the path ahead touches a new one.
 """
 
 from __future__ import annotations
@@ -267,8 +276,13 @@ class Planner:
         fence: Fence = Fence(),
         polygons: Iterable[Sequence[EN]] = (),
         circles: Iterable[Circle] = (),
+        persistent_margin_m: Callable[[], float] = lambda: 0.0,
     ) -> None:
+        """``persistent_margin_m()``: the margin in force for persistent obstacles."""
         self.params = params
+        self._persistent_margin_m = persistent_margin_m
+        self._persistent: list[Polygon] = []
+        self._persistent_near = Polygon()  # the persistent obstacles grown by the half-width, prepared
         self.robot = robot
         self.fence = fence
         self._obstacle_polygons = [Polygon(p) for p in polygons]
@@ -282,9 +296,9 @@ class Planner:
     def clearance_m(self) -> float:
         return self.robot.footprint_width_m / 2.0 + self.params.clearance_margin_m
 
-    def _geometry(self) -> tuple[float, int]:
+    def _geometry(self) -> tuple[float, int, float]:
         """The parameters the free space and graph are built from."""
-        return self.clearance_m, self.params.circle_segments
+        return self.clearance_m, self.params.circle_segments, self._persistent_margin_m()
 
     # -- geometry -------------------------------------------------------------------------------
 
@@ -298,8 +312,10 @@ class Planner:
         margin = self.clearance_m + extra_m
         grow = margin / math.cos(math.pi / (4 * quad_segs))
         circles = self._obstacle_circles + list(self.fence.exclusion_circles) + [c for _, c in self._blocked]
+        persistent_grow = (self.robot.footprint_width_m / 2.0 + self._persistent_margin_m() + extra_m) / math.cos(math.pi / (4 * quad_segs))
         zones = unary_union(
             [z.buffer(grow, quad_segs=quad_segs) for z in self._exclusion_polygons + self._obstacle_polygons]
+            + [z.buffer(persistent_grow, quad_segs=quad_segs) for z in self._persistent]
             + [_circle_polygon(c.center_en, c.radius_m + margin, n, circumscribed=True) for c in circles]
         )
         shrunk = [p.buffer(-grow, quad_segs=quad_segs) for p in self._inclusion_polygons] + [
@@ -451,6 +467,32 @@ class Planner:
         self._blocked.append((now_s, Circle((float(center_en[0]), float(center_en[1])), float(radius))))
         self._rebuild()
 
+    def set_persistent(self, polygons: Iterable[Sequence[EN]]) -> bool:
+        """Replace the persistent obstacles (rebuilds the graph); False when they are the same."""
+        shapes = [Polygon(p) for p in polygons]
+        shapes = [s if s.is_valid else s.buffer(0) for s in shapes if len(s.exterior.coords) >= 4]
+        if len(shapes) == len(self._persistent) and all(a.equals_exact(b, 0.0) for a, b in zip(shapes, self._persistent)):
+            return False
+        self._persistent = shapes
+        self._persistent_near = unary_union(shapes).buffer(self.robot.footprint_width_m / 2.0) if shapes else Polygon()
+        shapely.prepare(self._persistent_near)
+        self._rebuild()
+        return True
+
+    @property
+    def has_persistent(self) -> bool:
+        return bool(self._persistent)
+
+    def near_persistent(self, path: Path, s_from_m: float = 0.0) -> bool:
+        """Whether ``path`` beyond arc length ``s_from_m`` comes within the robot's half-width of
+        a persistent obstacle (the rover would touch it)."""
+        if not self._persistent or not path.ok or len(path.points) < 2:
+            return False
+        points = [path.point_at(s_from_m)] + [pt for pt, s in zip(path.points, path._cumulative_m) if s > s_from_m]
+        if len(points) < 2:
+            return False
+        return bool(self._persistent_near.intersects(shapely.LineString(points)))
+
     def expire(self, now_s: float) -> bool:
         """Forget blocked circles older than ``blocked_ttl_s``; True if any went."""
         kept = [(t, c) for t, c in self._blocked if now_s - t < self.params.blocked_ttl_s]
@@ -480,8 +522,10 @@ class PathFollower:
     """Keeps a path to the executor's current goal, re-plans when needed, and gives the carrot.
 
     Re-plans from the current position when the goal changes, when a leg is reported blocked,
-    when a blocked area expires, and -- at most once per ``replan_min_interval_s`` -- when the
-    cross-track error exceeds ``replan_off_path_m`` or the last plan failed.
+    when a blocked area expires, when new persistent obstacles come within the robot's half-width
+    of the path ahead, and -- at most once per ``replan_min_interval_s`` -- when the cross-track
+    error exceeds ``replan_off_path_m`` or the last plan failed. When the persistent obstacles
+    leave no way to the goal (a gap that reads closed), it plans without them until the goal changes.
     """
 
     def __init__(self, planner: Planner, params: PlannerParams) -> None:
@@ -492,11 +536,24 @@ class PathFollower:
         self._progress_s = 0.0
         self._last_plan_s = -math.inf
         self._force = False
+        self._persistent: tuple[tuple[EN, ...], ...] = ()
+        self._without_persistent: EN | None = None  # the goal planned for without persistent obstacles
 
     def block(self, now_s: float, center_en: EN, radius_m: float | None = None) -> None:
         """A leg is blocked at ``center_en``: avoid it (temporarily) and re-plan on the next update."""
         self.planner.block(now_s, center_en, radius_m)
         self._force = True
+
+    def set_persistent(self, polygons: Iterable[Sequence[EN]]) -> bool:
+        """New persistent obstacles for the planner; the next update re-plans only if the path
+        ahead would touch one. True when the planner's map changed."""
+        self._persistent = tuple(tuple(p) for p in polygons)
+        if self._without_persistent is not None and self._without_persistent == self._goal:
+            return False
+        changed = self.planner.set_persistent(self._persistent)
+        if changed and self.path is not None and self.planner.near_persistent(self.path, self._progress_s):
+            self._force = True
+        return changed
 
     def reset(self) -> None:
         """Forget the path (mode change): the next update plans afresh."""
@@ -513,7 +570,14 @@ class PathFollower:
             off_path = abs(cross_track) > self.params.replan_off_path_m or not self.path.ok
             replan = off_path and now_s - self._last_plan_s >= self.params.replan_min_interval_s
         if replan:
+            if self._without_persistent is not None and self._without_persistent != goal:
+                self._without_persistent = None
+                self.planner.set_persistent(self._persistent)
             self.path = self.planner.plan_leg(position_en, goal)
+            if not self.path.ok and self.planner.has_persistent:
+                self._without_persistent = goal
+                self.planner.set_persistent(())
+                self.path = self.planner.plan_leg(position_en, goal)
             self._goal, self._progress_s, self._last_plan_s, self._force = goal, 0.0, now_s, False
             cross_track = self._project(position_en)
         path = self.path

@@ -26,7 +26,7 @@ from estimator.synthetic import CMAC, Sensors, simulate
 
 import rover_ctl.app.daemon as daemon_module
 from rover_ctl.app.daemon import Daemon
-from rover_ctl.config import Config
+from rover_ctl.config import Config, ObstacleMapParams
 from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 from rover_ctl.mavlink.params import ConfigParams
 from rover_ctl.mission.model import Mission, MissionItem
@@ -231,6 +231,52 @@ def ex_yield_switch(d: Daemon) -> list:
     return [len(memory.tracker.tracks), ex_yielding(d)[:60]]
 
 
+def mapping(d: Daemon) -> None:
+    """A mission ahead, and the persistent-obstacle map on (whatever the default)."""
+    mission_ahead(d)
+    d.config.obstacle_map.enabled = True
+
+
+def ex_obstacle_map(d: Daemon) -> list:
+    """A rover driving north up to a wall across its leg with a short one in front of it, that
+    one taken away halfway (the beams see through where it was) and another put up on the left,
+    then 40 s without echoes:
+    what the map hands the planner, and the path, at each step."""
+    ap, trace = d.autopilot, []
+    walls = [((-2.0, 6.0), (2.0, 6.0)), ((0.8, 4.2), (1.6, 5.6)), ((-1.5, 4.5), (-0.8, 5.2))]
+    for k in range(500):
+        t = k * 0.04
+        north = min(0.02 * k, 3.0)
+        pose = SimpleNamespace(east_m=0.0, north_m=north, heading_rad=math.pi / 2, speed_mps=0.5)
+        axis = math.pi / 2 + 0.7 * math.sin(k * 0.37)
+        r = math.inf
+        for (ax, ay), (bx, by) in walls[:2] if t < 12.0 else walls[:1] + walls[2:]:
+            # beam (0, north) + s (cos, sin) against the segment a + u (b - a)
+            dx, dy, ex, ey = math.cos(axis), math.sin(axis), bx - ax, by - ay
+            det = ex * dy - ey * dx
+            if abs(det) > 1e-9:
+                s = (ex * (ay - north) - ey * ax) / det
+                u = (dx * (ay - north) - dy * ax) / det
+                if 0.0 <= u <= 1.0 and 0.0 < s <= 4.0:
+                    r = min(r, s)
+        ap.obstacle_map.add(t, 0.0, north, axis, r, 4.0)
+        row: dict = {}
+        ap._update_obstacle_map(t, pose, row)
+        g = ap.follower.update(t, (0.0, north), (0.0, 20.0))
+        trace.append((row.get("map_obstacles"), ap._map_obstacles, g.path.points if g.path else None))
+    pose = SimpleNamespace(east_m=0.0, north_m=-30.0, heading_rad=math.pi / 2, speed_mps=0.5)
+    for t in (40.0, 55.0, 70.0):  # far away, no echoes: the cells age
+        ap._map_handed_s = -math.inf
+        ap._update_obstacle_map(t, pose, {})
+        trace.append((len(ap.obstacle_map.cells), ap._map_obstacles))
+    return trace
+
+
+def ex_map_switch(d: Daemon) -> list:
+    """Whether the map's obstacles reach the planner at all."""
+    return ex_obstacle_map(d)[::25]
+
+
 def mission_for_planner(d: Daemon) -> None:
     lat, lon = latlon(15.0, 0.5)
     circle = MissionItem(Cmd.NAV_FENCE_CIRCLE_EXCLUSION, frame=0, param1=3.0, x=lat, y=lon)
@@ -387,6 +433,8 @@ EXERCISES = {
     "yielding": (no_mission, ex_yielding, ("yielding.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "yield_switch": (no_mission, ex_yield_switch, ("yielding.enabled",)),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
+    "obstacle_map": (mapping, ex_obstacle_map, tuple(f"obstacle_map.{f.name}" for f in dataclasses.fields(ObstacleMapParams) if f.name != "enabled")),
+    "map_switch": (mission_ahead, ex_map_switch, ("obstacle_map.enabled",)),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
 

@@ -1,0 +1,41 @@
+"""Persistent obstacles end to end (issue 12): emulator and daemon as processes, lockstep. In the
+benchmark's cul-de-sac (a U of walls open towards the rover on its leg) the rover, once its
+rangefinders have seen the U, has the walls in its planner's map and is planned out of the U and
+around it, instead of feeling its way along the walls."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+from shapely.geometry import LineString, Polygon
+
+from bench.bench_navigation import ACCEPTANCE_RADIUS_M, write_inputs
+from rover_ctl.app.report import read_jsonl
+from rover_ctl.app.sim import SimOptions, simulate
+from rover_ctl.tuning.scenarios import scenarios
+
+pytestmark = pytest.mark.sitl
+
+
+def test_in_the_cul_de_sac_the_rover_replans_around_the_walls_it_has_seen(tmp_path):
+    scenario = scenarios(1)["cul_de_sac"]
+    mission, world = write_inputs(scenario, tmp_path)
+    out = tmp_path / "run"
+    metrics = simulate(SimOptions(mission=mission, out=out, world=world, seed=1, timeout_s=240.0,
+                                  config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}",
+                                                    "obstacle_map.enabled=1"]), plots=False)  # fmt: skip
+    assert metrics["success"] and metrics["collisions"] == 0, metrics
+
+    rows = list(csv.DictReader((out / "control.csv").open()))
+    assert max(int(r["map_obstacles"] or 0) for r in rows) >= 1, "no persistent obstacle reached the planner"
+    # A plan made with the rover inside the U (between its side walls, short of its back wall)
+    # leads out of it: it does not cross the back wall, which the first plan did.
+    u = Polygon([(-2.5, 12.0), (-2.5, 17.0), (2.5, 17.0), (2.5, 12.0)])
+    back_wall = Polygon(scenario.polygons[1])
+    plans = [e for e in read_jsonl(out / "events.jsonl") if e.get("type") == "plan"]
+    assert LineString(plans[0]["path_en"]).intersects(back_wall)
+    inside = [p for p in plans[1:] if u.contains(LineString(p["path_en"][:2]).interpolate(0.0))]
+    assert inside, json.dumps(plans)[:2000]
+    assert not LineString(inside[-1]["path_en"]).intersects(back_wall), inside[-1]

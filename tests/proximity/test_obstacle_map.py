@@ -1,0 +1,140 @@
+"""Persistent obstacles: echo evidence in a sparse ENU grid, cleared by free space and age, the
+persistent places as a few polygons (rover_ctl.navigation.obstacle_map)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import Point, Polygon
+
+from rover_ctl.config import ObstacleMapParams
+from rover_ctl.navigation.obstacle_map import JOIN_FRACTION, ObstacleMap
+
+PARAMS = ObstacleMapParams()
+BODY_M = 0.3
+MAX_RANGE_M = 4.0
+
+
+def look_at_wall(m: ObstacleMap, t0: float, seconds: float, rover=(0.0, 0.0), wall_north_m=3.0, half_m=2.0, rate_hz=20.0,
+                 moving=(), ident=0) -> float:  # fmt: skip
+    """A rover at ``rover`` sweeping its beam over a wall along y = wall_north_m, |x| <= half_m."""
+    t = t0
+    for k in range(round(seconds * rate_hz)):
+        t = t0 + k / rate_hz
+        axis = math.pi / 2 + 0.5 * math.sin(k * 0.3)
+        r = (wall_north_m - rover[1]) / math.sin(axis)
+        hit = abs(rover[0] + r * math.cos(axis)) <= half_m and r <= MAX_RANGE_M
+        m.add(t, rover[0], rover[1], axis, r if hit else math.inf, MAX_RANGE_M, ident)
+        if k % 10 == 9:
+            m.update(t, rover, BODY_M, moving)
+    return t
+
+
+def covered(polygons, point, slack_m) -> bool:
+    return any(Polygon(p).buffer(slack_m).covers(Point(point)) for p in polygons)
+
+
+def test_a_wall_seen_repeatedly_becomes_one_polygon_and_not_before_min_span():
+    m = ObstacleMap(PARAMS)
+    look_at_wall(m, 0.0, PARAMS.min_span_s * 0.6)
+    assert not m.persistent, "seen for less than min_span_s"
+    look_at_wall(m, PARAMS.min_span_s * 0.6, 3.0)
+    obstacles = m.obstacles((0.0, 0.0))
+    assert len(obstacles) == 1 and len(obstacles[0]) <= 8, obstacles
+    # The wall's seen stretch lies inside the polygon (up to the simplification).
+    for x in (-1.0, 0.0, 1.0):
+        assert covered(obstacles, (x, 3.0), PARAMS.simplify_m + 1e-6)
+    assert not covered(obstacles, (0.0, 0.0), 0.0)
+
+
+def test_a_brief_echo_is_not_persistent():
+    m = ObstacleMap(PARAMS)
+    for k in range(10):  # half a second of echoes at one place: a pedestrian walking through
+        m.add(k * 0.05, 0.0, 0.0, math.pi / 2, 2.0, MAX_RANGE_M)
+    m.update(0.5, (0.0, 0.0), BODY_M)
+    assert m.cells and not m.persistent
+
+
+def test_free_space_clears_an_obstacle_that_has_gone():
+    m = ObstacleMap(PARAMS)
+    t = look_at_wall(m, 0.0, 3.0)
+    assert m.obstacles((0.0, 0.0))  # handed to the planner
+    for k in range(1, 200):  # the same beams now see nothing: the wall was a parked cart
+        axis = math.pi / 2 + 0.5 * math.sin(k * 0.3)
+        m.add(t + k * 0.05, 0.0, 0.0, axis, math.inf, MAX_RANGE_M)
+    assert m.update(t + 10.0, (0.0, 0.0), BODY_M) > 0  # the planner's obstacles changed
+    assert not m.persistent
+    assert m.obstacles((0.0, 0.0)) == ()
+
+
+def test_a_beam_stopping_at_the_obstacle_does_not_clear_it():
+    m = ObstacleMap(PARAMS)
+    t = look_at_wall(m, 0.0, 3.0)
+    before = m.persistent
+    look_at_wall(m, t, 5.0)
+    assert m.persistent >= before
+
+
+def test_cells_not_seen_for_ttl_are_forgotten():
+    params = replace(PARAMS, ttl_s=10.0)
+    m = ObstacleMap(params)
+    t = look_at_wall(m, 0.0, 3.0)
+    m.update(t + 9.0, (0.0, -20.0), BODY_M)
+    assert m.persistent
+    m.update(t + 10.5, (0.0, -20.0), BODY_M)
+    assert not m.cells
+
+
+def test_echoes_of_tracks_yielded_to_are_left_out():
+    m = ObstacleMap(PARAMS)
+    look_at_wall(m, 0.0, 3.0, moving={7}, ident=7)
+    assert not m.cells
+    look_at_wall(m, 3.0, 3.0, moving={7}, ident=8)
+    assert m.persistent
+
+
+def test_clusters_are_bounded_and_the_nearest_come_first():
+    params = replace(PARAMS, max_obstacles=3)
+    m = ObstacleMap(params)
+    drums = [(4.0 * i, 3.0) for i in range(6)]
+    for k in range(60):
+        for x, y in drums:  # a beam from 2 m south of each drum
+            m.add(k * 0.05, x, y - 2.0, math.pi / 2, 2.0, MAX_RANGE_M)
+        if k % 10 == 9:
+            m.update(k * 0.05, (-10.0, 0.0), BODY_M)
+    obstacles = m.obstacles((-10.0, 0.0))
+    assert len(obstacles) == 3
+    assert [round(Polygon(p).centroid.x) for p in obstacles] == [0, 4, 8]
+
+
+def test_a_new_cell_size_starts_a_new_grid():
+    params = replace(PARAMS)
+    m = ObstacleMap(params)
+    t = look_at_wall(m, 0.0, 3.0)
+    params.cell_m = 0.25
+    m.update(t, (0.0, 0.0), BODY_M)
+    assert not m.cells
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(-20, 20),
+    st.floats(-20, 20),
+    st.floats(-math.pi, math.pi),
+    st.lists(st.tuples(st.floats(0.0, 1.2), st.floats(-math.pi, math.pi)), min_size=1, max_size=12),
+)
+def test_the_rover_is_never_inside_a_persistent_obstacle(east, north, heading, echoes):
+    """Echoes anywhere around the rover, even under it (noise, its own wheels), seen long enough
+    to persist: no polygon handed to the planner contains the rover's position."""
+    m = ObstacleMap(PARAMS)
+    for k in range(80):
+        for range_m, bearing in echoes:
+            m.add(k * 0.05, east, north, heading + bearing, range_m, MAX_RANGE_M)
+        if k % 10 == 9:
+            m.update(k * 0.05, (east, north), BODY_M)
+    for polygon in m.obstacles((east, north)):
+        assert not Polygon(polygon).contains(Point(east, north))
+        assert Polygon(polygon).distance(Point(east, north)) >= BODY_M - PARAMS.simplify_m - PARAMS.cell_m * JOIN_FRACTION - 1e-9
