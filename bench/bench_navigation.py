@@ -11,6 +11,9 @@ sees them only with its rangefinders):
 * ``crossing``: crossing traffic on the two legs of ``open``: 2-5 drums (radius 0.3-0.6 m) at
   0.3-1.0 m/s, each crossing one leg at right angles from either side, timed (seeded, +-3 s) to
   reach the leg about when a rover at cruise speed gets there.
+* ``narrow_gap``: a 16 m wall across a 30 m leg with one opening 1.5 times the rover's width,
+  its centre up to 2 m off the leg (seeded).
+* ``dense_clutter``: 30 drums (radius 0.2-0.5 m, >= 1.2 m apart) within 3 m of a 50 m leg (seeded).
 
 Variants: the rule bases ``paper`` and ``default``, and ``default+predict``: the default rule base
 with obstacle tracks and prediction on (``proximity.horizon_s`` = ``PREDICT_HORIZON_S``).
@@ -85,6 +88,30 @@ def _wall(a: EN, b: EN, thickness_m: float = 0.3) -> list[EN]:
     return [(ax + nx, ay + ny), (bx + nx, by + ny), (bx - nx, by - ny), (ax - nx, ay - ny)]
 
 
+NARROW_GAP_WIDTH_M = 1.5 * RobotParams.footprint_width_m
+"""narrow_gap: the opening, 1.5 times the rover's width (issue 12)."""
+
+
+def _narrow_gap(seed: int) -> list[list[EN]]:
+    """A wall across the 30 m leg at 15 m, 16 m long, with one opening of ``NARROW_GAP_WIDTH_M``
+    whose centre lies up to 2 m either side of the leg (seeded)."""
+    centre = random.Random(seed * 7919 + 12).uniform(-2.0, 2.0)
+    half = NARROW_GAP_WIDTH_M / 2.0
+    return [_wall((-8.0, 15.0), (centre - half, 15.0)), _wall((centre + half, 15.0), (8.0, 15.0))]
+
+
+def _dense_clutter(seed: int, count: int = 30) -> list[tuple[EN, float]]:
+    """``count`` drums (radius 0.2-0.5 m) along a 50 m leg, within 3 m of it, none on the first or
+    last 3 m, at least 1.2 m apart edge to edge (seeded)."""
+    rng = random.Random(seed * 104729 + 30)
+    drums: list[tuple[EN, float]] = []
+    while len(drums) < count:
+        centre, radius = (rng.uniform(-3.0, 3.0), rng.uniform(3.0, 47.0)), rng.uniform(0.2, 0.5)
+        if all(math.dist(centre, c) - r - radius >= 1.2 for c, r in drums):
+            drums.append((centre, radius))
+    return drums
+
+
 def scenarios(seed: int) -> dict[str, Scenario]:
     two_legs = [(0.0, 0.0), (0.0, 30.0), (25.0, 30.0)]
     line = [(0.0, 0.0), (0.0, 40.0)]
@@ -106,6 +133,8 @@ def scenarios(seed: int) -> dict[str, Scenario]:
             along = rng.uniform(3.0, 22.0)
             arrive_s = (30.0 + along) / CRUISE_MPS + rng.uniform(-3.0, 3.0)
             crossing.append({"center_en": (along, 30.0 + side * speed * arrive_s), "radius_m": radius, "velocity_en": (0.0, -side * speed)})
+    narrow = _narrow_gap(seed)
+    clutter = _dense_clutter(seed)
     return {
         "open": Scenario("open", two_legs),
         "scattered": Scenario("scattered", two_legs, scatter=10),
@@ -116,6 +145,8 @@ def scenarios(seed: int) -> dict[str, Scenario]:
             {"center_en": (0.5, 28.0), "radius_m": 0.5, "velocity_en": (0.0, -0.3)},
         ]),  # fmt: skip
         "crossing": Scenario("crossing", two_legs, moving=crossing),
+        "narrow_gap": Scenario("narrow_gap", [(0.0, 0.0), (0.0, 30.0)], polygons=narrow),
+        "dense_clutter": Scenario("dense_clutter", [(0.0, 0.0), (0.0, 50.0)], circles=clutter),
     }
 
 
@@ -223,8 +254,9 @@ def _mean(values: list[float]) -> float:
     return statistics.fmean(values) if values else math.nan
 
 
-FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100}
-QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2}
+FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100, "narrow_gap": 100,
+               "dense_clutter": 100}  # fmt: skip
+QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2, "narrow_gap": 2, "dense_clutter": 2}
 PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 

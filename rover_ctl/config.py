@@ -470,6 +470,59 @@ class ProximityParams:
 
 
 @dataclass
+class PassageParams:
+    """Narrow passages (``rover_ctl.navigation.gaps``): a gap between obstacles, barely wider than
+    the rover, recognised from the remembered echoes and driven through on its centre line."""
+
+    enabled: bool = False
+    """Look for narrow passages. Off by default: in the emulator the rover does not yet find and
+    confirm the gap reliably (docs/perception.md, "Narrow passages"), and a candidate it lines up
+    for and gives up costs time."""
+    search_m: float = 3.5
+    """A gap is looked for up to this far ahead (m, along the direction to the path's carrot)."""
+    search_half_m: float = 3.0
+    """... and this far either side of that line (m)."""
+    side_clearance_m: float = 0.05
+    """An opening is a passage when it may be at least the footprint's width plus this much on each
+    side (m); inside a passage an echo counts only if it must lie within this of the rover's
+    swept strip."""
+    max_width_m: float = 1.2
+    """Openings wider than this (m) are left to the rule base: its sides read near only inside
+    0.7 m, so it drives through them unaided."""
+    min_hole_m: float = 0.15
+    """A candidate opening shows at least this much (m) between its edges' echoes as remembered
+    (before their beam spread): a wall sampled sparsely is not a row of gaps."""
+    verify_m: float = 2.0
+    """A candidate is looked through from this far (m) before its line, on its centre line: a beam
+    that passes shows the whole cone free there (2 r tan(beam_half) wide: 0.53 m at 2 m)."""
+    depth_m: float = 0.6
+    """Echoes within this distance (m) of the gap's line, along its axis, are its edges: the posts
+    or the wall the gap is in."""
+    beam_half_deg: float = 7.5
+    """Half the rangefinders' beam width (deg): an echo at range r may come from anywhere within
+    r tan(beam_half) of the beam's axis, where it is remembered."""
+    lookahead_m: float = 1.0
+    """Inside a passage the rover steers to the point this far (m) along the gap's centre line
+    beyond its own projection on it (pure pursuit on the centre line)."""
+    speed_mps: float = 0.4
+    """Speed limit while lining up and passing (m/s)."""
+    align_heading_deg: float = 20.0
+    """The gap's edges are set aside only while the rover heads within this of the gap's axis ..."""
+    commit_m: float = 0.8
+    """... or its front is farther than this (m) from the gap's line; otherwise the rule base sees
+    them as it sees any obstacle."""
+    exit_m: float = 0.3
+    """The passage is over when the rover's back is this far (m) beyond the gap's line."""
+    timeout_s: float = 30.0
+    """A passage not through after this long (s) is given up ..."""
+    reject_s: float = 30.0
+    """... and not tried again at that place for this long (s)."""
+    match_m: float = 0.4
+    """A gap found again within this distance (m) of the one being passed is the same gap: its
+    estimate is refreshed from the newer (nearer, sharper) echoes."""
+
+
+@dataclass
 class AutopilotParams:
     """Modes and arming (``rover_ctl.autopilot``), ArduPilot Rover's LOIT_* / ARMING_* counterparts."""
 
@@ -500,6 +553,7 @@ class Config:
     gcs: GcsParams = field(default_factory=GcsParams)
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
     proximity: ProximityParams = field(default_factory=ProximityParams)
+    passage: PassageParams = field(default_factory=PassageParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
     command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)
     """``section.field`` keys given with ``--set``: they win over values persisted from a ground station."""

@@ -6,7 +6,7 @@ has one: WP_RADIUS, WP_SPEED, RTL_SPEED, FS_GCS_TIMEOUT, FS_ACTION, FENCE_ACTION
 WENC_RADIUS, SCHED_LOOP_RATE; otherwise one prefix per section: ``RBT_`` robot, ``LINK_`` vehicle
 link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
 ``WHL_`` wheel control, ``DMN_`` control loop, ``GCS_`` ground-station link, ``NAV_`` navigator,
-``PRX_`` obstacle memory, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
+``PRX_`` obstacle memory, ``GAP_`` narrow passages, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
 default is the dataclass default and the description is the field's docstring in config.py, so
 neither is written twice.
 
@@ -374,6 +374,23 @@ _DECLARED: tuple[tuple, ...] = (
     ("proximity.track_min_speed_mps", "PRX_TRK_MIN_SPD", 0.0, 100.0, RW, {}),
     ("proximity.track_max_speed_mps", "PRX_TRK_MAX_SPD", 0.0, 100.0, RW, {}),
     ("proximity.track_max_count", "PRX_TRK_MAX", 1, 1000, RW, {}),
+    ("passage.enabled", "GAP_ENABLE", 0, 1, RW, {}),
+    ("passage.search_m", "GAP_SEARCH", 0.5, 20.0, RW, {}),
+    ("passage.search_half_m", "GAP_SEARCH_HALF", 0.2, 20.0, RW, {}),
+    ("passage.side_clearance_m", "GAP_SIDE_CLEAR", 0.0, 1.0, RW, {}),
+    ("passage.max_width_m", "GAP_MAX_WIDTH", 0.0, 10.0, RW, {}),
+    ("passage.min_hole_m", "GAP_MIN_HOLE", 0.0, 5.0, RW, {}),
+    ("passage.verify_m", "GAP_VERIFY", 0.2, 10.0, RW, {}),
+    ("passage.depth_m", "GAP_DEPTH", 0.05, 5.0, RW, {}),
+    ("passage.beam_half_deg", "GAP_BEAM_HALF", 0.0, 45.0, RW, {}),
+    ("passage.lookahead_m", "GAP_LOOKAHEAD", 0.1, 10.0, RW, {}),
+    ("passage.speed_mps", "GAP_SPEED", 0.05, 5.0, RW, {}),
+    ("passage.align_heading_deg", "GAP_ALIGN_HDG", 1.0, 90.0, RW, {}),
+    ("passage.commit_m", "GAP_COMMIT", 0.0, 10.0, RW, {}),
+    ("passage.exit_m", "GAP_EXIT", 0.0, 5.0, RW, {}),
+    ("passage.timeout_s", "GAP_TIMEOUT", 1.0, 600.0, RW, {}),
+    ("passage.reject_s", "GAP_REJECT", 0.0, 3600.0, RW, {}),
+    ("passage.match_m", "GAP_MATCH", 0.01, 5.0, RW, {}),
 )
 CONFIG_ONLY = frozenset({"link.vehicle_url", "link.gcs_url", "gcs.mission_store_path", "daemon.log_dir", "gcs.signing_key_path"})
 """Text fields: config file and command line only, never parameters."""

@@ -52,6 +52,7 @@ from rover_ctl.estimation.readings import Attitude, RangeReading, WheelDistance
 from rover_ctl.estimation.wheel_map import WheelMapCheck
 from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import Home, Mission
+from rover_ctl.navigation.gaps import Passage
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
@@ -150,6 +151,8 @@ class Autopilot:
         self.loop_rate = LoopRate(config.daemon)
         self._loop: LoopRateState | None = None
         self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
+        self.passage = Passage(config.passage, lambda: config.proximity.memory_s, lambda: robot.footprint_length_m,
+                               lambda: robot.footprint_width_m)  # fmt: skip
         self.mode = RoverMode.HOLD
         self.armed = False
         self.home: Home | None = None
@@ -506,8 +509,19 @@ class Autopilot:
             if reading.time_s > self._remembered_s.get(orientation, -math.inf):
                 self._remembered_s[orientation] = reading.time_s
                 self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
+                e, n, axis = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
+                self.passage.beam(reading.time_s, (e, n), axis, reading.range_m, reading.max_range_m)
+        target, ignore, distance_m = guidance.target_en, None, guidance.remaining_m
+        gap = self.passage.update(t_s, (pose.east_m, pose.north_m), pose.heading_rad, target, self.proximity.echoes(t_s))
+        for text in self.passage.events:
+            self._say(text)
+        self.passage.events.clear()
+        if gap is not None:  # a narrow passage: its centre line steers, its edges are set aside, slowly
+            target, ignore, speed_mps = gap.target_en, gap.ignore, min(speed_mps, gap.speed_limit_mps)
+            distance_m = distance_m if gap.target_distance_m is None else gap.target_distance_m
+            row.update(target_east_m=target[0], target_north_m=target[1], speed_limit_mps=speed_mps)
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()},
-                                       pose.speed_mps)  # fmt: skip
+                                       pose.speed_mps, ignore)  # fmt: skip
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
         if decision.speed_limit_mps is not None:  # a blind side, or rangefinders slower than the speed needs
@@ -516,8 +530,8 @@ class Autopilot:
         if self._loop is not None and self._loop.speed_limit_mps is not None:  # slow loop: bounded travel per step
             speed_mps = min(speed_mps, self._loop.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
-        nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
-                                  ranges, speed_mps, guidance.remaining_m)  # fmt: skip
+        nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, target[0], target[1],
+                                  ranges, speed_mps, distance_m)  # fmt: skip
         self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
         row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
@@ -558,6 +572,7 @@ class Autopilot:
             self._returning = False
         if self.follower is not None:
             self.follower.reset()
+        self.passage.reset()
         self.wheels.reset()
         if previous != mode:
             self._outbox.append(ModeChanged(mode, previous, reason))
