@@ -509,10 +509,15 @@ class Autopilot:
             if reading.time_s > self._remembered_s.get(orientation, -math.inf):
                 self._remembered_s[orientation] = reading.time_s
                 self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
-                e, n, axis = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
-                self.passage.beam(reading.time_s, (e, n), axis, reading.range_m, reading.max_range_m)
+                if self.config.passage.enabled:  # no cost when off
+                    e, n, axis = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
+                    self.passage.beam(reading.time_s, (e, n), axis, reading.range_m, reading.max_range_m)
         target, ignore, distance_m = guidance.target_en, None, guidance.remaining_m
-        gap = self.passage.update(t_s, (pose.east_m, pose.north_m), pose.heading_rad, target, self.proximity.echoes(t_s))
+        gap = None
+        if self.config.passage.enabled:
+            gap = self.passage.update(t_s, (pose.east_m, pose.north_m), pose.heading_rad, target, self.proximity.echoes(t_s))
+        else:
+            self.passage.reset()
         for text in self.passage.events:
             self._say(text)
         self.passage.events.clear()
