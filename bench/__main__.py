@@ -6,7 +6,9 @@ Each benchmark is a module ``bench/bench_<name>.py`` with ``run(quick: bool) -> 
 order. ``python -m bench [NAME ...] [--quick]`` runs some or all of them; sections of benchmarks not
 run this time are kept from their last JSON. ``python -m bench navigation --only crossing,moving
 --worlds 10`` runs some scenarios of the navigation benchmark on fewer worlds (its other rows are
-kept from the last run, each row dated).
+kept from the last run, each row dated); ``--variants paper,default`` runs only those variants
+(likewise keeping the other rows); ``--rulebase FILE`` compares a rule base file (a
+``rover-ctl tune`` result) with default in a table of its own (``navigation_rulebase.json``).
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")
     parser.add_argument("--only", metavar="SCENARIO,...", help="navigation: run only these scenarios (the other rows are kept from the last run)")
     parser.add_argument("--worlds", type=int, metavar="N", help="navigation: N seeded worlds per scenario instead of the full counts")
+    parser.add_argument("--variants", metavar="NAME,...", help="navigation: run only these variants (rule base + settings; the other rows are kept)")
+    parser.add_argument("--rulebase", metavar="FILE", help="navigation: this rule base file against default, in a table of its own")
     args = parser.parse_args(argv)
     names = args.names or available()
     unknown = sorted(set(names) - set(available()))
@@ -43,18 +47,22 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         print(f"== bench {name}", flush=True)
         started = time.perf_counter()
-        options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds)) if v}
+        options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds),
+                                     ("variants", args.variants and args.variants.split(",")), ("rulebase", args.rulebase)) if v}  # fmt: skip
         if options and name != "navigation":
-            parser.error(f"--only and --worlds apply to the navigation benchmark, not {name}")
+            parser.error(f"--only, --worlds, --variants and --rulebase apply to the navigation benchmark, not {name}")
         module = importlib.import_module(f"bench.bench_{name}")
         unknown = sorted(set(options.get("only", ())) - set(getattr(module, "FULL_WORLDS", ())))
         if unknown:
             parser.error(f"unknown scenario(s) {', '.join(unknown)} (known: {', '.join(module.FULL_WORLDS)})")
+        unknown = sorted(set(options.get("variants", ())) - set(getattr(module, "VARIANTS", ())))
+        if unknown:
+            parser.error(f"unknown variant(s) {', '.join(unknown)} (known: {', '.join(module.VARIANTS)})")
         result = module.run(quick=args.quick, **options)
         result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
         result.setdefault("date", time.strftime("%Y-%m-%d"))
         result["wall_s"] = round(time.perf_counter() - started, 1)
-        (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=2, default=float) + "\n")
+        (RESULTS / f"{result.get('name', name)}.json").write_text(json.dumps(result, indent=2, default=float) + "\n")
         print(result.get("markdown", ""), flush=True)
     write_doc()
     return 0
@@ -69,7 +77,7 @@ def write_doc() -> None:
     for path in sorted(RESULTS.glob("*.json")):
         result = json.loads(path.read_text())
         parts.append(f"\n## {result.get('title', path.stem)}\n")
-        parts.append(f"_`python -m bench {path.stem}` on {result.get('date')}, {result.get('machine')}, {result.get('wall_s')} s._\n")
+        parts.append(f"_`{result.get('command', f'python -m bench {path.stem}')}` on {result.get('date')}, {result.get('machine')}, {result.get('wall_s')} s._\n")
         parts.append(result.get("markdown", "") + "\n")
     DOC.write_text("\n".join(parts))
 

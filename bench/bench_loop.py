@@ -3,7 +3,8 @@ start-up.
 
 * Real time: ``missions/cmac_loop.waypoints`` against rover-sitl at speed-up 1 (six rangefinders)
   and against ArduPilot's firmware at speed-up 1 (layout "six"), a ground station attached (this
-  process, ``SimRun``/``FirmwareRun``). The daemon runs as ``python -m bench.loop_probe``, i.e.
+  process, ``SimRun``/``FirmwareRun``), ``SAMPLES`` times each, alternating; the table shows each
+  vehicle's median run, and every run is listed. The daemon runs as ``python -m bench.loop_probe``, i.e.
   ``rover-ctl run`` with its methods timed from outside (the daemon keeps no profiling code). The
   window is the first ``WINDOW_S`` wall seconds after MISSION_START: CPU seconds per part divided by
   the control steps in it, process CPU / wall, peak RSS (VmHWM) at its end.
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import signal
 import statistics
 import subprocess
@@ -38,6 +40,10 @@ WHEELS = ["link.wheel_left_index=1", "link.wheel_right_index=0"]
 HEAVY = ("scipy", "scipy.stats", "scipy.optimize", "scipy.ndimage", "scipy.linalg", "scipy.integrate", "filterpy",
          "networkx", "shapely", "pyproj", "matplotlib", "rich", "bench")  # fmt: skip
 """Packages whose presence after the daemon's import is reported."""
+SAMPLES = 3
+"""Real-time runs per vehicle, rover-sitl and firmware alternating (the machine is shared: a single
+run can be off by tens of percent); each column of the table is the run with the median CPU per
+step, and every run's figure is listed beside it."""
 STARTUP_REPEATS = 5
 BASELINE = Path(__file__).resolve().parent / "baselines" / "loop_before.json"
 """This benchmark's result on the tree before issue 17's changes (BASELINE_COMMIT with this bench's
@@ -104,11 +110,13 @@ def _timed_call_cost_s(n: int = 200_000) -> float:
 
 def _startup() -> dict:
     env = dict(os.environ)
-    helps = []
+    helps, help_cpu = [], []
     for _ in range(STARTUP_REPEATS):
-        started = time.perf_counter()
+        started, before = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
         subprocess.run([*ROVER_CTL, "--help"], check=True, stdout=subprocess.DEVNULL, env=env)
         helps.append(time.perf_counter() - started)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        help_cpu.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
     code = ("import sys, time; t = time.perf_counter(); import rover_ctl.app.daemon; "
             f"t = time.perf_counter() - t; n = len(sys.modules); heavy = [m for m in {HEAVY!r} if m in sys.modules]; "
             "import json; from bench.rss import peak_rss_kb; "
@@ -118,7 +126,7 @@ def _startup() -> dict:
     bare = [json.loads(subprocess.run([sys.executable, "-c", "from bench.rss import peak_rss_kb; print(peak_rss_kb())"],
                                       check=True, capture_output=True, text=True).stdout) for _ in range(2)]  # fmt: skip
     return {
-        "help_s": statistics.median(helps), "help_min_s": min(helps),
+        "help_s": statistics.median(helps), "help_min_s": min(helps), "help_cpu_s": statistics.median(help_cpu),
         "import_s": statistics.median(i["import_s"] for i in imports), "import_min_s": min(i["import_s"] for i in imports),
         "import_rss_mb": statistics.median(i["max_rss_kb"] for i in imports) / 1024,
         "bare_python_rss_mb": min(bare) / 1024,
@@ -155,6 +163,8 @@ def _table(runs: dict[str, dict], startup: dict) -> str:
         "| start-up | figure |",
         "|---|---|",
         f"| `rover-ctl --help` wall (median of {STARTUP_REPEATS}) | {startup['help_s']:.3f} s (min {startup['help_min_s']:.3f} s) |",
+        *([f"| `rover-ctl --help` CPU, user + system (median; the wall time waits for a shared core) | {startup['help_cpu_s']:.3f} s |"]
+          if "help_cpu_s" in startup else []),
         f"| `import rover_ctl.app.daemon` (median of {STARTUP_REPEATS}) | {startup['import_s']:.3f} s (min {startup['import_min_s']:.3f} s) |",
         f"| RSS after that import (bare interpreter: {startup['bare_python_rss_mb']:.0f} MB) | {startup['import_rss_mb']:.0f} MB |",
         f"| modules loaded by it | {startup['modules']} |",
@@ -203,18 +213,33 @@ def _compare(runs: dict[str, dict], startup: dict) -> str:
 def run(quick: bool) -> dict:
     window_s = 15.0 if quick else WINDOW_S
     call_cost_s = _timed_call_cost_s()
-    runs: dict[str, dict] = {}
+    samples: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        sim = SimOptions(mission=MISSION, out=Path(tmp) / "sitl", lockstep=False, speedup=1, timeout_s=400)
-        runs["rover-sitl 1x"] = _summary(_drive(_ProbedSim, sim, window_s), call_cost_s)
-        if firmware_path() is not None:
-            fw = FirmwareOptions(mission=MISSION, out=Path(tmp) / "fw", lockstep=False, speedup=1, timeout_s=400,
-                                 rangefinders="six", config_overrides=list(WHEELS))  # fmt: skip
-            runs["ArduPilot firmware 1x"] = _summary(_drive(_ProbedFirmware, fw, window_s), call_cost_s)
+        for index in range(1 if quick else SAMPLES):
+            load = os.getloadavg()[0]
+            sim = SimOptions(mission=MISSION, out=Path(tmp) / f"sitl{index}", lockstep=False, speedup=1, timeout_s=400)
+            run_ = _summary(_drive(_ProbedSim, sim, window_s), call_cost_s)
+            samples.setdefault("rover-sitl 1x", []).append(run_ | {"load_average": load})
+            if firmware_path() is not None:
+                load = os.getloadavg()[0]
+                fw = FirmwareOptions(mission=MISSION, out=Path(tmp) / f"fw{index}", lockstep=False, speedup=1, timeout_s=400,
+                                     rangefinders="six", config_overrides=list(WHEELS))  # fmt: skip
+                run_ = _summary(_drive(_ProbedFirmware, fw, window_s), call_cost_s)
+                samples.setdefault("ArduPilot firmware 1x", []).append(run_ | {"load_average": load})
+    runs = {label: sorted(runs_, key=lambda r: r["cpu_per_step_ms"])[(len(runs_) - 1) // 2] for label, runs_ in samples.items()}
     result = {"title": "Control loop on a companion computer: CPU per step, share, memory, start-up", "window_s": window_s,
-              "timed_call_cost_us": call_cost_s * 1e6, "runs": runs, "startup": _startup()}  # fmt: skip
+              "timed_call_cost_us": call_cost_s * 1e6, "runs": runs, "samples": samples, "startup": _startup()}  # fmt: skip
     result["markdown"] = markdown(result)
     return result
+
+
+def _samples(samples: dict[str, list[dict]]) -> str:
+    lines = []
+    for label, runs in samples.items():
+        figures = ", ".join(f"{r['cpu_per_step_ms']:.2f} ms ({r['cpu_share_pct']:.1f}%, load {r['load_average']:.1f})" for r in runs)
+        cpu = [r["cpu_per_step_ms"] for r in runs]
+        lines.append(f"- {label}: {figures}; spread {min(cpu):.2f}-{max(cpu):.2f} ms per step")
+    return "\n".join(lines)
 
 
 def markdown(result: dict) -> str:
@@ -233,6 +258,12 @@ def markdown(result: dict) -> str:
         "emulator or firmware, this ground station and other work, so repeated runs differ by some tens of percent).",
         "",
         _table(runs, startup),
+        "",
+        f"Each column is the median of {max(len(v) for v in result.get('samples', {'': [0]}).values())} runs by CPU per step "
+        "(rover-sitl and firmware alternating); every run's CPU per step, share of one core and the machine's "
+        "1-minute load average when it started:",
+        "",
+        _samples(result.get("samples", {})),
         "",
         _goals(runs, startup),
         "",

@@ -1,22 +1,12 @@
 """Navigation benchmark: seeded worlds driven end to end (emulator + daemon in lockstep), per rule base.
 
-Scenarios (all at ArduPilot's CMAC field; the daemon is never told where the obstacles are, it
-sees them only with its rangefinders):
+Scenarios: ``rover_ctl.tuning.scenarios`` (open, scattered, walls, cul_de_sac, moving, crossing,
+head_on, overtaking, narrow_gap, dense_clutter; all at ArduPilot's CMAC field, shared with ``rover-ctl tune``; the daemon is
+never told where the obstacles are, it sees them only with its rangefinders).
 
-* ``open``: no obstacles, two legs (0,0) -> (0,30) -> (25,30).
-* ``scattered``: the same legs with ``rover-sitl --scatter`` obstacles (seeded; >= 2 m gaps).
-* ``walls``: one straight leg of 40 m crossed by two walls, each with a 2.5 m gap off the line.
-* ``cul_de_sac``: a U of walls open towards the rover on the line of a 30 m leg.
-* ``moving``: a 0.6 m drum crossing the 30 m leg at 0.5 m/s, and one travelling against the rover.
-* ``crossing``: crossing traffic on the two legs of ``open``: 2-5 drums (radius 0.3-0.6 m) at
-  0.3-1.0 m/s, each crossing one leg at right angles from either side, timed (seeded, +-3 s) to
-  reach the leg about when a rover at cruise speed gets there.
-* ``narrow_gap``: a 16 m wall across a 30 m leg with one opening 1.5 times the rover's width,
-  its centre up to 2 m off the leg (seeded).
-* ``dense_clutter``: 30 drums (radius 0.2-0.5 m, >= 1.2 m apart) within 3 m of a 50 m leg (seeded).
-
-Variants: the rule bases ``paper`` and ``default``, and ``default+predict``: the default rule base
-with obstacle tracks and prediction on (``proximity.horizon_s`` = ``PREDICT_HORIZON_S``).
+Variants: the rule bases ``paper`` and ``default`` (the daemon as shipped: yielding to crossing
+traffic on), and ``default-yield``: the default rule base with yielding off (``YLD_ENABLE`` 0,
+the navigator of the previous rows).
 A collision is "moving" when the rover's true speed at the contact was above
 ``STOPPED_SPEED_MPS``, else "stopped" (struck while yielding).
 
@@ -31,156 +21,45 @@ from __future__ import annotations
 
 import json
 import math
-import random
 import statistics
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from rover_ctl.config import PlannerParams, RobotParams
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
-from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
 from rover_ctl.navigation.planner import Circle, Planner
+from rover_ctl.tuning.scenarios import HOME, Scenario, scenarios, world_doc
+from rover_ctl.tuning.scenarios import mission as scenario_mission
 from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimError, SimOptions, simulate
 
-HOME = (-35.363261, 149.165230, 584.0)
-PREDICT_HORIZON_S = 2.0
-VARIANTS = {"paper": ("paper", []), "default": ("default", []),
-            "default+predict": ("default", [f"proximity.horizon_s={PREDICT_HORIZON_S}"])}  # fmt: skip
+VARIANTS = {"paper": ("paper", []), "default": ("default", []), "default-yield": ("default", ["yielding.enabled=0"])}
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
 """A collision with the rover slower than this (truth) was one it was struck in while stopped."""
-CRUISE_MPS = 1.2
-"""executor.cruise_speed_mps: the crossing traffic is timed for it."""
 WORKERS = 2
 """Simulations run side by side (each is two processes; the machine has 2 cores)."""
 ACCEPTANCE_RADIUS_M = 0.5
 """Waypoint acceptance radius for the runs: small, so that cutting corners does not shorten paths."""
 TIME_BUDGET_S = 240.0
 """Sim seconds a mission may take before it counts as failed."""
-NAV_WAYPOINT = 16
 
 EN = tuple[float, float]
 
 
-@dataclass
-class Scenario:
-    name: str
-    legs_en: list[EN]
-    """Home first, then the waypoints."""
-    circles: list[tuple[EN, float]] = field(default_factory=list)
-    polygons: list[list[EN]] = field(default_factory=list)
-    moving: list[dict[str, Any]] = field(default_factory=list)
-    """Circle features with a "motion" member (centre_en, radius_m, velocity_en)."""
-    scatter: int = 0
-
-
-def _wall(a: EN, b: EN, thickness_m: float = 0.3) -> list[EN]:
-    """A thin rectangle from a to b."""
-    (ax, ay), (bx, by) = a, b
-    length = math.dist(a, b)
-    nx, ny = -(by - ay) / length * thickness_m / 2, (bx - ax) / length * thickness_m / 2
-    return [(ax + nx, ay + ny), (bx + nx, by + ny), (bx - nx, by - ny), (ax - nx, ay - ny)]
-
-
-NARROW_GAP_WIDTH_M = 1.5 * RobotParams.footprint_width_m
-"""narrow_gap: the opening, 1.5 times the rover's width (issue 12)."""
-
-
-def _narrow_gap(seed: int) -> list[list[EN]]:
-    """A wall across the 30 m leg at 15 m, 16 m long, with one opening of ``NARROW_GAP_WIDTH_M``
-    whose centre lies up to 2 m either side of the leg (seeded)."""
-    centre = random.Random(seed * 7919 + 12).uniform(-2.0, 2.0)
-    half = NARROW_GAP_WIDTH_M / 2.0
-    return [_wall((-8.0, 15.0), (centre - half, 15.0)), _wall((centre + half, 15.0), (8.0, 15.0))]
-
-
-def _dense_clutter(seed: int, count: int = 30) -> list[tuple[EN, float]]:
-    """``count`` drums (radius 0.2-0.5 m) along a 50 m leg, within 3 m of it, none on the first or
-    last 3 m, at least 1.2 m apart edge to edge (seeded)."""
-    rng = random.Random(seed * 104729 + 30)
-    drums: list[tuple[EN, float]] = []
-    while len(drums) < count:
-        centre, radius = (rng.uniform(-3.0, 3.0), rng.uniform(3.0, 47.0)), rng.uniform(0.2, 0.5)
-        if all(math.dist(centre, c) - r - radius >= 1.2 for c, r in drums):
-            drums.append((centre, radius))
-    return drums
-
-
-def scenarios(seed: int) -> dict[str, Scenario]:
-    two_legs = [(0.0, 0.0), (0.0, 30.0), (25.0, 30.0)]
-    line = [(0.0, 0.0), (0.0, 40.0)]
-    gap1 = 1.0 + (seed % 3)  # gap position varies with the seed
-    walls = [
-        _wall((-12.0, 14.0), (gap1, 14.0)), _wall((gap1 + 2.5, 14.0), (12.0, 14.0)),
-        _wall((-12.0, 26.0), (-gap1 - 2.5, 26.0)), _wall((-gap1, 26.0), (12.0, 26.0)),
-    ]  # fmt: skip
-    cul = [_wall((-2.5, 12.0), (-2.5, 17.0)), _wall((-2.5, 17.0), (2.5, 17.0)), _wall((2.5, 17.0), (2.5, 12.0))]
-    rng = random.Random(seed)
-    crossing = []
-    for _ in range(rng.randint(2, 5)):
-        speed, radius, side = rng.uniform(0.3, 1.0), rng.uniform(0.3, 0.6), rng.choice((-1.0, 1.0))
-        if rng.random() < 0.6:  # the first leg, northwards along x = 0
-            along = rng.uniform(6.0, 27.0)
-            arrive_s = along / CRUISE_MPS + rng.uniform(-3.0, 3.0)
-            crossing.append({"center_en": (side * speed * arrive_s, along), "radius_m": radius, "velocity_en": (-side * speed, 0.0)})
-        else:  # the second leg, eastwards along y = 30
-            along = rng.uniform(3.0, 22.0)
-            arrive_s = (30.0 + along) / CRUISE_MPS + rng.uniform(-3.0, 3.0)
-            crossing.append({"center_en": (along, 30.0 + side * speed * arrive_s), "radius_m": radius, "velocity_en": (0.0, -side * speed)})
-    narrow = _narrow_gap(seed)
-    clutter = _dense_clutter(seed)
-    return {
-        "open": Scenario("open", two_legs),
-        "scattered": Scenario("scattered", two_legs, scatter=10),
-        "walls": Scenario("walls", line, polygons=walls),
-        "cul_de_sac": Scenario("cul_de_sac", [(0.0, 0.0), (0.0, 30.0)], polygons=cul),
-        "moving": Scenario("moving", [(0.0, 0.0), (0.0, 30.0)], moving=[
-            {"center_en": (-8.0, 12.0), "radius_m": 0.6, "velocity_en": (0.5, 0.0)},
-            {"center_en": (0.5, 28.0), "radius_m": 0.5, "velocity_en": (0.0, -0.3)},
-        ]),  # fmt: skip
-        "crossing": Scenario("crossing", two_legs, moving=crossing),
-        "narrow_gap": Scenario("narrow_gap", [(0.0, 0.0), (0.0, 30.0)], polygons=narrow),
-        "dense_clutter": Scenario("dense_clutter", [(0.0, 0.0), (0.0, 50.0)], circles=clutter),
-    }
-
-
 def write_inputs(scenario: Scenario, folder: Path) -> tuple[Path, Path | None]:
     """The mission file and (unless scattered) the world file of a scenario."""
-    frame = LocalFrame(*HOME)
-
-    def lonlat(point: EN) -> list[float]:
-        lat, lon = frame.to_geodetic(*point)
-        return [lon, lat]
-
-    items = []
-    for east, north in scenario.legs_en[1:]:
-        lat, lon = frame.to_geodetic(east, north)
-        items.append(MissionItem(NAV_WAYPOINT, FRAME_GLOBAL_RELATIVE_ALT, x=lat, y=lon))
     mission_path = folder / "mission.waypoints"
-    save_mission(Mission(items=items, home=Home(*HOME)), mission_path)
+    save_mission(scenario_mission(scenario), mission_path)
     if scenario.scatter:
         return mission_path, None
-    features = [
-        {"type": "Feature", "geometry": {"type": "Point", "coordinates": lonlat(c)}, "properties": {"radius_m": r}}
-        for c, r in scenario.circles
-    ]
-    features += [
-        {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [[lonlat(p) for p in poly + [poly[0]]]]}, "properties": {}}
-        for poly in scenario.polygons
-    ]
-    features += [
-        {"type": "Feature", "geometry": {"type": "Point", "coordinates": lonlat(m["center_en"])},
-         "properties": {"radius_m": m["radius_m"], "motion": {"type": "velocity", "velocity_mps": list(m["velocity_en"])}}}
-        for m in scenario.moving
-    ]  # fmt: skip
     world_path = folder / "world.geojson"
-    world_path.write_text(json.dumps({"type": "FeatureCollection", "home": [HOME[1], HOME[0], HOME[2], 0.0], "features": features}))
+    world_path.write_text(json.dumps(world_doc(scenario)))
     return mission_path, world_path
 
 
@@ -225,10 +104,10 @@ def collisions_moving(out: Path) -> tuple[int, int]:
     return moving, stopped
 
 
-def one_run(name: str, variant: str, seed: int, root: Path) -> dict[str, Any]:
+def one_run(name: str, variant: str, seed: int, root: Path, variants: dict = VARIANTS) -> dict[str, Any]:
     scenario = scenarios(seed)[name]
-    rulebase, overrides = VARIANTS[variant]
-    folder = root / f"{name}-{variant}-{seed}"
+    rulebase, overrides = variants[variant]
+    folder = root / f"{name}-{variant.replace('/', '_')}-{seed}"
     folder.mkdir(parents=True)
     mission_path, world_path = write_inputs(scenario, folder)
     options = SimOptions(mission=mission_path, out=folder / "run", world=world_path, obstacles=scenario.scatter or None,
@@ -254,16 +133,27 @@ def _mean(values: list[float]) -> float:
     return statistics.fmean(values) if values else math.nan
 
 
-FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100, "narrow_gap": 100,
-               "dense_clutter": 100}  # fmt: skip
-QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2, "narrow_gap": 2, "dense_clutter": 2}
+FULL_WORLDS = {"open": 3, "scattered": 100, "walls": 10, "cul_de_sac": 5, "moving": 10, "crossing": 100, "head_on": 100, "overtaking": 100,
+               "narrow_gap": 100, "dense_clutter": 100}  # fmt: skip
+QUICK_WORLDS = {"open": 1, "scattered": 3, "walls": 1, "cul_de_sac": 1, "moving": 1, "crossing": 2, "head_on": 1, "overtaking": 1,
+                "narrow_gap": 1, "dense_clutter": 1}  # fmt: skip
 PREVIOUS = Path(__file__).resolve().parent / "results" / "navigation.json"
 """With ``only``, the rows of the other scenarios are kept from here (the last run)."""
 
 
-def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -> dict[str, Any]:
-    """All scenarios and variants, or ``only`` these scenarios (the others' rows kept from the
-    last run), on ``worlds`` seeded worlds each instead of the default counts."""
+def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, rulebase: str | None = None,
+        variants: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
+    """All scenarios and variants, or ``only`` these scenarios and ``variants`` (the other rows
+    kept from the last run), on ``worlds`` seeded worlds each instead of the default counts. ``rulebase``: a
+    rule base file (a ``rover-ctl tune`` result) against ``default`` instead of the variants, in
+    a table of its own (``bench/results/navigation_rulebase.json``)."""
+    chosen = variants
+    variants = {name: VARIANTS[name] for name in VARIANTS if not chosen or name in chosen}
+    if rulebase:
+        path = Path(rulebase).resolve()
+        if not path.is_file():
+            raise ValueError(f"--rulebase {rulebase}: no such file")
+        variants = {"default": VARIANTS["default"], path.name: (str(path), [])}
     counts = dict(QUICK_WORLDS if quick else FULL_WORLDS)
     unknown = sorted(set(only or ()) - set(counts))
     if unknown:
@@ -272,13 +162,13 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         counts = {name: counts[name] for name in only}
     if worlds:
         counts = {name: worlds for name in counts}
-    jobs = [(name, variant, seed) for name, count in counts.items() for variant in VARIANTS for seed in range(1, count + 1)]
+    jobs = [(name, variant, seed) for name, count in counts.items() for variant in variants for seed in range(1, count + 1)]
     with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
-        runs = list(pool.map(lambda job: one_run(*job, Path(tmp)), jobs))
+        runs = list(pool.map(lambda job: one_run(*job, Path(tmp), variants), jobs))
     today = time.strftime("%Y-%m-%d")
     fresh = []
     for name in counts:
-        for variant in VARIANTS:
+        for variant in variants:
             group = [r for r in runs if r["scenario"] == name and r["rulebase"] == variant]
             fresh.append({
                 "scenario": name, "rulebase": variant, "runs": len(group), "date": today,
@@ -293,10 +183,15 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
                 "latency_p99_ms": max((r.get("latency_p99_ms") or 0.0 for r in group), default=math.nan),
             })  # fmt: skip
     rows = fresh
-    if only and PREVIOUS.exists():
+    if (only or chosen) and PREVIOUS.exists() and not rulebase:
         previous = json.loads(PREVIOUS.read_text())
-        kept = [dict(r, date=r.get("date", previous.get("date"))) for r in previous.get("rows", []) if r["scenario"] not in counts]
-        runs = [r for r in previous.get("runs", []) if r["scenario"] not in counts] + runs
+
+        def fresh_now(r: dict) -> bool:
+            return r["scenario"] in counts and r["rulebase"] in variants
+
+        kept = [dict(r, date=r.get("date", previous.get("date"))) for r in previous.get("rows", [])
+                if not fresh_now(r) and r["rulebase"] in VARIANTS]  # fmt: skip
+        runs = [r for r in previous.get("runs", []) if not fresh_now(r) and r["rulebase"] in VARIANTS] + runs
         order = list(FULL_WORLDS)
         rows = sorted(kept + fresh, key=lambda r: (order.index(r["scenario"]) if r["scenario"] in order else len(order), list(VARIANTS).index(r["rulebase"])))
     lines = [
@@ -322,14 +217,20 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None) -
         "for a near target, so it slows to a crawl as it closes in and rarely gets inside the 0.5 m "
         "acceptance radius within the time budget, even in the open field."
     )
-    markdown += (
-        f"\n\ndefault+predict: the default rule base with obstacle tracks and prediction "
-        f"(`proximity.horizon_s={PREDICT_HORIZON_S:g}`, docs/perception.md). Collisions (moving / stopped): "
+    markdown += "" if rulebase else (
+        "\n\ndefault-yield: the default rule base with yielding to crossing traffic off (`YLD_ENABLE=0`, "
+        "docs/perception.md); rows measured before yielding existed ran without it too. Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
         "the split was added have it). Measured: the date of the run that made the row."
     )
-    if only or worlds:
+    if rulebase:
+        markdown += (f"\n\n_This run: `--rulebase {rulebase}` against default on {', '.join(f'{n} seeds 1-{c}' for n, c in counts.items())}._")
+        command = f"python -m bench navigation --only {','.join(counts)}" + (f" --worlds {worlds}" if worlds else "") + f" --rulebase {rulebase}"
+        return {"title": f"Navigation: default vs {Path(rulebase).name} (emulator in the loop)", "name": "navigation_rulebase", "command": command,
+                "markdown": markdown, "rows": rows, "runs": runs, "quick": quick, "rulebase": str(rulebase)}  # fmt: skip
+    if only or worlds or chosen:
         markdown += (f"\n\n_This run: `--only {','.join(counts)}`" if only else "\n\n_This run: all scenarios") + \
+            (f" `--variants {','.join(variants)}`" if chosen else "") + \
             (f" on {worlds} worlds each (to fit the wall time; the full counts are {FULL_WORLDS})" if worlds else "") + \
             "; the other rows are kept from the run named by their date._"  # fmt: skip
     if quick:

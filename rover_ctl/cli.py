@@ -17,7 +17,7 @@ from rover_ctl import __version__
 from rover_ctl.config import ConfigError
 
 # Subcommand modules, in the order shown by --help.
-COMMANDS = ("run", "sim", "mission", "control", "params", "signing", "fuzzy")
+COMMANDS = ("run", "sim", "mission", "control", "params", "signing", "fuzzy", "tune")
 
 
 class UserError(Exception):

@@ -377,6 +377,12 @@ class DaemonParams:
     between two control steps (6.25 m/s at 25 Hz: a loop that keeps up is never limited; 1.4 m/s at
     5.6 Hz, above the cruise speed: a tighter limit made the firmware at 50x track worse, 210 m
     driven for a 170 m mission against 182 m without it, as the slow stretch lasted longer)."""
+    lockstep_silence_s: float = 2.0
+    """In lockstep, wall-clock seconds without a message from the emulator before the vehicle-link
+    failsafe acts on the wall clock (its 0.4 s ``failsafe.vehicle_timeout_s`` is vehicle time).
+    A lockstep emulator's time stands still while its process waits for the CPU, so a loaded
+    machine pauses it for a while without anything being wrong; a real vehicle sends no lockstep
+    markers and gets the vehicle timeout on the wall clock."""
     vehicle_wait_s: float = 30.0
     """Start-up: give up when no vehicle heartbeat arrives within this (wall clock)."""
     command_timeout_s: float = 0.5
@@ -470,6 +476,45 @@ class ProximityParams:
 
 
 @dataclass
+class YieldParams:
+    """Yielding to crossing traffic (``rover_ctl.navigation.yielding``): the speed along the path
+    at which no moving obstacle track comes within the robot's radius plus ``margin_m``."""
+
+    enabled: bool = True
+    """Yield to crossing obstacles (needs their tracks: the obstacle memory builds them while this is on)."""
+    horizon_s: float = 4.0
+    """How far ahead the closest approach is looked for (s): at 1.2 m/s, 4.8 m of path, about the
+    rangefinders' reach."""
+    margin_m: float = 0.9
+    """Clearance kept between the robot's outline (its circumscribed radius) and a crossing
+    obstacle's near surface (m)."""
+    release_margin_m: float = 0.3
+    """A track yielded to is released only when full speed clears it by this much more (m), so
+    that track noise does not make the rover lurch."""
+    min_cross_mps: float = 0.15
+    """A track counts as crossing when its velocity across the rover's heading is at least this
+    (m/s); slower across, it walks along the rover's line and is steered around instead."""
+    min_hits: int = 8
+    """A track is yielded to only after this many echoes (about half a second of one rangefinder)."""
+    max_speed_sd_mps: float = 0.3
+    """...and only while its velocity's standard deviation is at most this (m/s, either axis)."""
+    min_travel_m: float = 0.6
+    """...and only once it has gone this far from its first echo (m): an echo sliding over a static
+    drum's face moves up to about its radius; 1.6 s of a pedestrian at 0.5 m/s."""
+    max_heading_off_deg: float = 30.0
+    """No new yield starts while the rover's heading is more than this off its course to the
+    target (deg): it is turning around something, and its tracks' velocities are unreliable."""
+    max_wait_s: float = 10.0
+    """Longest an obstacle yielded to is still waited for after its track was lost (s): meanwhile
+    it is taken to move on at its last velocity."""
+    min_cross_deg: float = 45.0
+    """...and its course at least this far off the rover's line (deg): a walker coming head-on or
+    walking ahead, whose estimated velocity wobbles a little across the line, is steered around."""
+    speed_steps: int = 4
+    """Speeds tried below full: fractions (steps-1)/steps ... 0 of it (4: 75, 50, 25 and 0%)."""
+
+
+@dataclass
 class PassageParams:
     """Narrow passages (``rover_ctl.navigation.gaps``): a gap between obstacles, barely wider than
     the rover, recognised from the remembered echoes and driven through on its centre line."""
@@ -553,6 +598,7 @@ class Config:
     gcs: GcsParams = field(default_factory=GcsParams)
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
     proximity: ProximityParams = field(default_factory=ProximityParams)
+    yielding: YieldParams = field(default_factory=YieldParams)
     passage: PassageParams = field(default_factory=PassageParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
     command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)

@@ -6,7 +6,7 @@ has one: WP_RADIUS, WP_SPEED, RTL_SPEED, FS_GCS_TIMEOUT, FS_ACTION, FENCE_ACTION
 WENC_RADIUS, SCHED_LOOP_RATE; otherwise one prefix per section: ``RBT_`` robot, ``LINK_`` vehicle
 link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
 ``WHL_`` wheel control, ``DMN_`` control loop, ``GCS_`` ground-station link, ``NAV_`` navigator,
-``PRX_`` obstacle memory, ``GAP_`` narrow passages, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
+``PRX_`` obstacle memory, ``YLD_`` yielding, ``GAP_`` narrow passages, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
 default is the dataclass default and the description is the field's docstring in config.py, so
 neither is written twice.
 
@@ -304,6 +304,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("daemon.loop_rate_window_s", "SCHED_RATE_WIN", 0.2, 60.0, RW, {}),
     ("daemon.slow_loop_fraction", "SCHED_SLOW_FRAC", 0.0, 1.0, RW, {}),
     ("daemon.max_step_travel_m", "SCHED_STEP_TRVL", 0.01, 10.0, RW, {}),
+    ("daemon.lockstep_silence_s", "DMN_LOCK_SILENT", 0.1, 3600.0, START, {}),
     ("daemon.vehicle_wait_s", "DMN_VEH_WAIT", 0.1, 3600.0, START, {}),
     ("daemon.command_timeout_s", "DMN_CMD_TIMEOUT", 0.05, 60.0, START, {}),
     ("daemon.command_retries", "DMN_CMD_RETRIES", 0, 100, START, {}),
@@ -374,6 +375,18 @@ _DECLARED: tuple[tuple, ...] = (
     ("proximity.track_min_speed_mps", "PRX_TRK_MIN_SPD", 0.0, 100.0, RW, {}),
     ("proximity.track_max_speed_mps", "PRX_TRK_MAX_SPD", 0.0, 100.0, RW, {}),
     ("proximity.track_max_count", "PRX_TRK_MAX", 1, 1000, RW, {}),
+    ("yielding.enabled", "YLD_ENABLE", 0, 1, RW, {}),
+    ("yielding.horizon_s", "YLD_HORIZON", 0.1, 30.0, RW, {}),
+    ("yielding.margin_m", "YLD_MARGIN", 0.0, 10.0, RW, {}),
+    ("yielding.release_margin_m", "YLD_RELEASE", 0.0, 10.0, RW, {}),
+    ("yielding.min_cross_mps", "YLD_MIN_CROSS", 0.0, 10.0, RW, {}),
+    ("yielding.min_cross_deg", "YLD_MIN_ANGLE", 0.0, 90.0, RW, {"units": "deg"}),
+    ("yielding.min_hits", "YLD_MIN_HITS", 1, 1000, RW, {}),
+    ("yielding.max_speed_sd_mps", "YLD_MAX_VEL_SD", 0.01, 10.0, RW, {}),
+    ("yielding.min_travel_m", "YLD_MIN_TRAVEL", 0.0, 100.0, RW, {}),
+    ("yielding.max_heading_off_deg", "YLD_MAX_HDG_OFF", 0.0, 180.0, RW, {"units": "deg"}),
+    ("yielding.max_wait_s", "YLD_MAX_WAIT", 0.0, 120.0, RW, {}),
+    ("yielding.speed_steps", "YLD_SPD_STEPS", 1, 20, RW, {}),
     ("passage.enabled", "GAP_ENABLE", 0, 1, RW, {}),
     ("passage.search_m", "GAP_SEARCH", 0.5, 20.0, RW, {}),
     ("passage.search_half_m", "GAP_SEARCH_HALF", 0.2, 20.0, RW, {}),

@@ -281,6 +281,8 @@ class Emulator:
             t_s = self.clock.t_s
             for endpoint in self.endpoints:  # what a serial line delivered by t_k
                 self.receive(endpoint, endpoint.arrivals())
+            if self.vehicle.armed:
+                self.rover.world.armed(t_s)
             if self.clock.k > 0:
                 for event in self.rover.step(self.clock.frame_s):
                     self._event(event)

@@ -9,6 +9,10 @@ World file: a GeoJSON FeatureCollection (RFC 7946, coordinates [lon, lat]).
   "loop": true}``. The geometry as drawn is the obstacle at t = 0; a waypoint motion translates it
   by (position on the path - path[0]), so a path that starts at the obstacle moves it along the path.
   With ``loop`` the path closes back to its start; without, the obstacle stops at its end.
+  Either motion may say ``"start": "armed"``: the obstacle then stays where it is drawn until the
+  rover first arms and its motion's clock starts there (default ``"boot"``: at sim time 0). A
+  scenario timed against the rover's drive (a pedestrian reaching the leg as the rover does) needs
+  this: how long a ground station takes to upload and arm is not part of the scenario.
 - Optional top-level members ``"home": [lon, lat, alt_m, heading_deg]`` and ``"faults"`` (see
   ``sitl.faults``).
 
@@ -57,11 +61,14 @@ class Motion:
     path_lonlat: tuple[tuple[float, float], ...] = ()
     speed_mps: float = 0.0
     loop: bool = True
+    start: str = "boot"
+    """When the motion's clock starts: "boot" (sim time 0) or "armed" (the rover's first arming)."""
 
     def to_json(self) -> dict:
+        start = {} if self.start == "boot" else {"start": self.start}
         if self.kind == "velocity":
-            return {"type": "velocity", "velocity_mps": list(self.velocity_en_mps)}
-        return {"type": "waypoints", "path": [list(p) for p in self.path_lonlat], "speed_mps": self.speed_mps, "loop": self.loop}
+            return {"type": "velocity", "velocity_mps": list(self.velocity_en_mps), **start}
+        return {"type": "waypoints", "path": [list(p) for p in self.path_lonlat], "speed_mps": self.speed_mps, "loop": self.loop, **start}
 
 
 @dataclass(frozen=True)
@@ -229,15 +236,21 @@ def _parse_feature(feature: object, index: int) -> Obstacle:
     return obstacle
 
 
+MOTION_STARTS = ("boot", "armed")
+
+
 def _parse_motion(value: object) -> Motion:
     if not isinstance(value, dict):
         raise WorldError("'motion' must be an object")
     kind = value.get("type")
+    start = value.get("start", "boot")
+    if start not in MOTION_STARTS:
+        raise WorldError(f"motion start must be one of {', '.join(map(repr, MOTION_STARTS))}, got {start!r}")
     if kind == "velocity":
         vel = value.get("velocity_mps")
         if not isinstance(vel, list) or len(vel) != 2:
             raise WorldError("motion velocity_mps must be [east, north]")
-        return Motion("velocity", velocity_en_mps=(_number(vel[0], "velocity east"), _number(vel[1], "velocity north")))
+        return Motion("velocity", velocity_en_mps=(_number(vel[0], "velocity east"), _number(vel[1], "velocity north")), start=start)
     if kind == "waypoints":
         path = value.get("path")
         if not isinstance(path, list) or len(path) < 2:
@@ -249,7 +262,7 @@ def _parse_motion(value: object) -> Motion:
         loop = value.get("loop", True)
         if not isinstance(loop, bool):
             raise WorldError(f"motion loop must be true or false, got {loop!r}")
-        return Motion("waypoints", path_lonlat=points, speed_mps=speed, loop=loop)
+        return Motion("waypoints", path_lonlat=points, speed_mps=speed, loop=loop, start=start)
     raise WorldError(f"unknown motion type {kind!r} (use 'velocity' or 'waypoints')")
 
 
@@ -264,7 +277,7 @@ class LocalObstacle:
 
     def __init__(self, ident: str, kind: str, ref_en: tuple[float, float], radius_m: float,
                  vertices_rel: list[tuple[float, float]], motion_path_en: list[tuple[float, float]] | None,
-                 velocity_en_mps: tuple[float, float], speed_mps: float, loop: bool) -> None:
+                 velocity_en_mps: tuple[float, float], speed_mps: float, loop: bool, armed_clock: bool = False) -> None:
         self.id = ident
         self.kind = kind
         self.ref_en = ref_en
@@ -283,11 +296,16 @@ class LocalObstacle:
                 lengths.append(lengths[-1] + math.hypot(bx - ax, by - ay))
             self._path, self._cumulative = path, lengths
         self.moving = self._path is not None or velocity_en_mps != (0.0, 0.0)
+        self.epoch_s: float | None = None if armed_clock else 0.0
+        """Sim time at which the motion's clock reads 0 (None: waiting for the rover to arm)."""
         self._shape0 = Point(ref_en).buffer(radius_m, 32) if kind == "circle" else Polygon(
             [(ref_en[0] + x, ref_en[1] + y) for x, y in vertices_rel])
 
     def offset(self, time_s: float) -> tuple[float, float]:
         """Translation of the obstacle at ``time_s`` from where it is drawn."""
+        if self.epoch_s is None:
+            return 0.0, 0.0
+        time_s = max(time_s - self.epoch_s, 0.0)
         if self._path is None:
             return self._velocity[0] * time_s, self._velocity[1] * time_s
         total = self._cumulative[-1]
@@ -354,13 +372,14 @@ def _localise(obstacle: Obstacle, frame: LocalFrame) -> LocalObstacle:
     motion = obstacle.motion
     path = None
     velocity, speed, loop = (0.0, 0.0), 0.0, True
+    armed_clock = motion is not None and motion.start == "armed"
     if motion is not None and motion.kind == "velocity":
         velocity = motion.velocity_en_mps
     elif motion is not None:
         pe, pn = frame.to_en(np.array([p[1] for p in motion.path_lonlat]), np.array([p[0] for p in motion.path_lonlat]))
         path = [(float(e), float(n)) for e, n in zip(pe, pn)]
         speed, loop = motion.speed_mps, motion.loop
-    return LocalObstacle(obstacle.id, obstacle.kind, ref, radius, vertices, path, velocity, speed, loop)
+    return LocalObstacle(obstacle.id, obstacle.kind, ref, radius, vertices, path, velocity, speed, loop, armed_clock)
 
 
 class LocalWorld:
@@ -370,6 +389,17 @@ class LocalWorld:
         self.obstacles = obstacles
         self._refs_time_s: float | None = None
         self._refs: list[tuple[float, float]] = []
+        self._started = False
+
+    def armed(self, time_s: float) -> None:
+        """The rover armed at ``time_s``: motions that start at arming start now (first arming only)."""
+        if self._started:
+            return
+        self._started = True
+        for obstacle in self.obstacles:
+            if obstacle.epoch_s is None:
+                obstacle.epoch_s = time_s
+                self._refs_time_s = None
 
     def ray_cast(self, origin_en: tuple[float, float], bearing_rad: float, max_m: float,
                  time_s: float) -> tuple[float, str] | None:

@@ -8,8 +8,10 @@ import json
 import subprocess
 import sys
 
-DAEMON_MUST_NOT_LOAD = ("scipy", "filterpy", "matplotlib", "rich", "rover_ctl.app.report", "rover_ctl.app.sim", "bench")
-HELP_MUST_NOT_LOAD = ("numpy", "scipy", "matplotlib", "rich", "shapely", "networkx", "pyproj", "rover_ctl.fuzzy", "rover_ctl.app")
+DAEMON_MUST_NOT_LOAD = ("scipy", "filterpy", "matplotlib", "rich", "rover_ctl.app.report", "rover_ctl.app.sim", "bench",
+                        "cma", "distributed", "dask", "rover_ctl.tuning")  # fmt: skip
+HELP_MUST_NOT_LOAD = ("numpy", "scipy", "matplotlib", "rich", "shapely", "networkx", "pyproj", "rover_ctl.fuzzy", "rover_ctl.app",
+                      "cma", "distributed")  # fmt: skip
 
 
 def _loaded_after(code: str, names: tuple[str, ...]) -> list[str]:

@@ -38,6 +38,7 @@ from typing import Any
 from rover_ctl.app.logs import CsvLog, LogClock, TlogWriter
 from rover_ctl.autopilot.autopilot import LOG_COLUMNS, RELEASE, Autopilot, Readings, StepOutput
 from rover_ctl.autopilot.events import ArmRequest, Event, ItemReached, MissionCurrent, StatusText
+from rover_ctl.autopilot.loop_rate import ControlTicks
 from rover_ctl.config import Config
 from rover_ctl.estimation.estimator import PoseEstimator
 from rover_ctl.estimation.frame import LocalFrame, enu_to_compass_rad
@@ -107,7 +108,7 @@ class Daemon:
         self.ranges: dict[int, RangeReading] = {}
         self.battery: Battery | None = None
         self.lockstep = False
-        self.next_tick_s: float | None = None
+        self.ticks = ControlTicks(lambda: self.period_s)
         self._released = False
         self._rx_perf: float | None = None
         self._marker_wall_s = 0.0
@@ -481,13 +482,8 @@ class Daemon:
 
     def _maybe_step(self, t_s: float) -> None:
         """Run the control step if vehicle time ``t_s`` reached the next tick."""
-        if self.next_tick_s is None:
-            self.next_tick_s = t_s
-        if t_s + 1e-9 < self.next_tick_s:
+        if not self.ticks.due(t_s):
             return
-        self.next_tick_s += self.period_s
-        if self.next_tick_s <= t_s:  # fell behind (a gap in the data): do not replay missed ticks
-            self.next_tick_s = t_s + self.period_s
         last = self.link.last_rx_vehicle_s
         self.control_step(t_s, vehicle_age_s=0.0 if last is None else max(0.0, t_s - last))
 
@@ -521,12 +517,14 @@ class Daemon:
     def _check_silence(self) -> None:
         """Nothing at all from the vehicle (not even lockstep markers, which would drive the
         control step and its failsafe in vehicle time): step the autopilot on the wall clock, at
-        most once a control period, so that its vehicle-link failsafe sends neutral."""
+        most once a control period, so that its vehicle-link failsafe sends neutral. In lockstep
+        only after ``daemon.lockstep_silence_s``: a starved emulator is paused, not gone."""
         link = self.link
         if link.last_rx_wall_s is None:
             return
         age_s = time.monotonic() - max(link.last_rx_wall_s, self._marker_wall_s)
-        if age_s <= self.config.failsafe.vehicle_timeout_s or time.monotonic() < self._silent_neutral_wall_s:
+        timeout_s = self.config.daemon.lockstep_silence_s if self.lockstep else self.config.failsafe.vehicle_timeout_s
+        if age_s <= timeout_s or time.monotonic() < self._silent_neutral_wall_s:
             return
         self._silent_neutral_wall_s = time.monotonic() + self.period_s
         t_s = link.vehicle_time_s + age_s

@@ -26,12 +26,15 @@ import shutil
 import struct
 import time
 from pathlib import Path
+from itertools import repeat
 from typing import Any, Callable, Iterable
 
 RUN_NAME = re.compile(r"^\d{8}$")
 """A run folder's name: eight digits, as ArduPilot's 00000012.BIN."""
 LATEST = "latest"
 """The symlink to the newest run folder."""
+TLOG_STAMP = struct.Struct(">Q")
+"""A .tlog record's timestamp: microseconds, big-endian, before the frame."""
 
 
 class LogDirError(RuntimeError):
@@ -161,8 +164,7 @@ class TlogWriter:
         if not buf:
             return
         # pymavlink's readers expect the low two bits clear (they mark other record kinds).
-        usec = int(self._clock() * 1e6) & ~3
-        self._file.write(struct.pack(">Q", usec) + bytes(buf))
+        self._file.write(TLOG_STAMP.pack(int(self._clock() * 1e6) & ~3) + buf)
         self.frames += 1
 
     def close(self) -> None:
@@ -179,12 +181,18 @@ class CsvLog:
         self.columns = list(columns)
         self._digits = digits
         self._file = open(self.path, "w", newline="", encoding="utf-8")
-        self._writer = csv.DictWriter(self._file, fieldnames=self.columns, extrasaction="raise")
-        self._writer.writeheader()
+        self._names = frozenset(self.columns)
+        # csv.DictWriter's output, one list per row: it rebuilt a dict and a set for every row.
+        self._writer = csv.writer(self._file)
+        self._writer.writerow(self.columns)
         self.rows = 0
 
     def write(self, row: dict[str, Any]) -> None:
-        self._writer.writerow({k: round(v, self._digits) if isinstance(v, float) else v for k, v in row.items()})
+        """One row; a missing column is empty, an unknown one a ValueError (as DictWriter's "raise")."""
+        if not row.keys() <= self._names:
+            raise ValueError(f"dict contains fields not in fieldnames: {', '.join(map(repr, row.keys() - self._names))}")
+        digits = self._digits
+        self._writer.writerow([round(v, digits) if isinstance(v, float) else v for v in map(row.get, self.columns, repeat(""))])
         self.rows += 1
 
     def flush(self) -> None:

@@ -56,6 +56,7 @@ from rover_ctl.navigation.gaps import Passage
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
+from rover_ctl.navigation.yielding import Yielder
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
@@ -67,7 +68,7 @@ LOG_COLUMNS = (
     "est_healthy", "gps_ok", "goal_seq", "goal_east_m", "goal_north_m", "target_east_m", "target_north_m",
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
-    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "latency_ms",
+    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "latency_ms",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
@@ -150,7 +151,9 @@ class Autopilot:
         self.failsafes = Failsafes(config.failsafe)
         self.loop_rate = LoopRate(config.daemon)
         self._loop: LoopRateState | None = None
-        self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
+        self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m,
+                                        tracking=lambda: config.yielding.enabled)  # fmt: skip
+        self.yielder = Yielder(config.yielding, lambda: math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0)
         self.passage = Passage(config.passage, lambda: config.proximity.memory_s, lambda: robot.footprint_length_m,
                                lambda: robot.footprint_width_m)  # fmt: skip
         self.mode = RoverMode.HOLD
@@ -535,6 +538,15 @@ class Autopilot:
         if self._loop is not None and self._loop.speed_limit_mps is not None:  # slow loop: bounded travel per step
             speed_mps = min(speed_mps, self._loop.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
+        if self.config.yielding.enabled:  # crossing traffic: slow or stop on the path and let it pass
+            rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
+            tracks = self.proximity.tracker.moving(t_s, rover_velocity)
+            course = math.atan2(target[1] - pose.north_m, target[0] - pose.east_m)
+            alive = {track.ident for track in self.proximity.tracker.tracks}
+            yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive, pose.heading_rad)
+            if yielded.speed_limit_mps is not None:
+                speed_mps = yielded.speed_limit_mps
+                row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, target[0], target[1],
                                   ranges, speed_mps, distance_m)  # fmt: skip
         self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)

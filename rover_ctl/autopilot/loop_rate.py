@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Callable
 
 from rover_ctl.config import DaemonParams
 
@@ -32,6 +33,27 @@ INTERVAL_QUANTILE = 0.9
 """The rate is 1 / this quantile of the step intervals over the window: a loop that stalls often
 (a starved machine: bursts of steps, then nothing while the last command drives on) reads slow,
 while one gap in the vehicle's data (the link failsafe's business) does not."""
+
+
+class ControlTicks:
+    """The control step's schedule in vehicle time: a tick every ``period_s()``; ticks missed in a
+    gap of the vehicle's data are not replayed (the next one is a period after the gap)."""
+
+    def __init__(self, period_s: Callable[[], float]) -> None:
+        self._period_s = period_s
+        self.next_s: float | None = None
+
+    def due(self, t_s: float) -> bool:
+        """Whether a step is due at vehicle time ``t_s``; if so the next tick is scheduled."""
+        if self.next_s is None:
+            self.next_s = t_s
+        if t_s + 1e-9 < self.next_s:
+            return False
+        period_s = self._period_s()
+        self.next_s += period_s
+        if self.next_s <= t_s:
+            self.next_s = t_s + period_s
+        return True
 
 
 @dataclass(frozen=True)

@@ -145,11 +145,17 @@ class Path:
     points: tuple[EN, ...]
     error: str | None = None
     _cumulative_m: np.ndarray = field(init=False, repr=False, compare=False)
+    _segments: tuple[np.ndarray, ...] = field(init=False, repr=False, compare=False)
+    """(start points, direction vectors, lengths, squared lengths) of the segments, for ``project``
+    at every control step."""
 
     def __post_init__(self) -> None:
         pts = np.asarray(self.points, dtype=float).reshape(-1, 2)
         steps = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
-        object.__setattr__(self, "_cumulative_m", np.concatenate([[0.0], np.cumsum(steps)]))
+        cum = np.concatenate([[0.0], np.cumsum(steps)])
+        object.__setattr__(self, "_cumulative_m", cum)
+        seg_len = np.diff(cum)
+        object.__setattr__(self, "_segments", (pts[:-1], np.diff(pts, axis=0), seg_len, seg_len**2))
 
     @property
     def ok(self) -> bool:
@@ -176,12 +182,10 @@ class Path:
         signed cross-track error (positive when ``point_en`` is left of the path direction)."""
         if len(self.points) < 2:
             return 0.0, math.dist(point_en, self.points[0]) if self.points else 0.0
-        pts = np.asarray(self.points, dtype=float)
-        a, d = pts[:-1], np.diff(pts, axis=0)
+        a, d, seg_len, seg_len2 = self._segments
         cum = self._cumulative_m
-        seg_len = np.diff(cum)
         p = np.asarray(point_en, dtype=float)
-        t = np.divide(((p - a) * d).sum(axis=1), seg_len**2, out=np.zeros_like(seg_len), where=seg_len > 0)
+        t = np.divide(((p - a) * d).sum(axis=1), seg_len2, out=np.zeros_like(seg_len), where=seg_len > 0)
         lo, hi = np.maximum(cum[:-1], s_min_m), np.minimum(cum[1:], s_max_m)
         s = np.clip(cum[:-1] + t * seg_len, lo, np.maximum(lo, hi))
         f = np.divide(s - cum[:-1], seg_len, out=np.zeros_like(seg_len), where=seg_len > 0)
@@ -346,15 +350,20 @@ class Planner:
         return None
 
     def _inside_inclusions(self, point_en: EN) -> bool:
-        p = Point(point_en)
-        return all(poly.covers(p) for poly in self._inclusion_polygons) and all(
-            math.dist(point_en, c.center_en) <= c.radius_m for c in self.fence.inclusion_circles
-        )
+        # The shapely Point only when there are polygons: this runs at every control step.
+        if self._inclusion_polygons:
+            p = Point(point_en)
+            if not all(poly.covers(p) for poly in self._inclusion_polygons):
+                return False
+        return all(math.dist(point_en, c.center_en) <= c.radius_m for c in self.fence.inclusion_circles)
 
     @staticmethod
     def _in_any(point_en: EN, polygons: Sequence[Polygon], circles: Iterable[Circle]) -> bool:
-        p = Point(point_en)
-        return any(poly.contains(p) for poly in polygons) or any(math.dist(point_en, c.center_en) < c.radius_m for c in circles)
+        if polygons:
+            p = Point(point_en)
+            if any(poly.contains(p) for poly in polygons):
+                return True
+        return any(math.dist(point_en, c.center_en) < c.radius_m for c in circles)
 
     def _to_free(self, point_en: EN) -> EN | None:
         """``point_en`` if it is in free space, else the nearest point of it (None: none at all)."""

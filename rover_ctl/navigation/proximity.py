@@ -46,13 +46,17 @@ class ObstacleMemory:
         params: ProximityParams,
         footprint_length_m: float | Callable[[], float],
         footprint_width_m: float | Callable[[], float],
+        tracking: Callable[[], bool] = lambda: False,
     ) -> None:
-        """``params`` is read at every call; the footprint may be functions giving the value in force."""
+        """``params`` is read at every call; the footprint may be functions giving the value in force.
+        Echoes go to the tracker while prediction is on or ``tracking()`` says another user needs
+        the tracks (yielding, ``rover_ctl.navigation.yielding``)."""
         self.params = params
         self._length_m = footprint_length_m if callable(footprint_length_m) else (lambda: footprint_length_m)
         self._width_m = footprint_width_m if callable(footprint_width_m) else (lambda: footprint_width_m)
         self._points = np.empty((0, 6))  # rows: time_s, east_m, north_m, track ident, range_m, beam axis (rad, ENU)
         self.tracker = ObstacleTracker(params)
+        self._tracking = tracking
 
     def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
         """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
@@ -72,7 +76,8 @@ class ObstacleMemory:
             return
         e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
         east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
-        ident = self.tracker.add(time_s, east, north) if self.params.horizon_s > 0.0 else 0  # no cost when off
+        tracked = self.params.horizon_s > 0.0 or self._tracking()
+        ident = self.tracker.add(time_s, east, north) if tracked else 0  # no cost when off
         self._points = np.vstack((self._points, (time_s, east, north, ident, range_m, axis)))
 
     def echoes(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

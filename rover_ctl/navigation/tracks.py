@@ -74,6 +74,14 @@ class Track:
     """Velocity variance of either axis (m^2/s^2)."""
     hits: int = 1
     last_echo_s: float = 0.0
+    born_en: tuple[float, float] | None = None
+    """Where the track started (its first echo): how far it has really gone tells a mover from an
+    echo wandering over a static obstacle's face."""
+
+    @property
+    def travel_m(self) -> float:
+        """Distance from the first echo to the current estimate (0 without a birth position)."""
+        return 0.0 if self.born_en is None else math.hypot(self.east_m - self.born_en[0], self.north_m - self.born_en[1])
 
     @property
     def speed_mps(self) -> float:
@@ -139,7 +147,7 @@ class ObstacleTracker:
         if len(self.tracks) >= p.track_max_count:
             self.tracks.remove(min(self.tracks, key=lambda t: t.last_echo_s))
         track = Track(self._next_ident, time_s, east_m, north_m, pp=p.track_echo_sigma_m**2,
-                      vv=p.track_init_speed_sigma_mps**2, last_echo_s=time_s)  # fmt: skip
+                      vv=p.track_init_speed_sigma_mps**2, last_echo_s=time_s, born_en=(east_m, north_m))  # fmt: skip
         self._next_ident += 1
         self.tracks.append(track)
         return track.ident

@@ -7,7 +7,7 @@ import math
 
 from autopilot.harness import Bench, mission
 
-from rover_ctl.autopilot.loop_rate import LoopRate
+from rover_ctl.autopilot.loop_rate import ControlTicks, LoopRate
 from rover_ctl.config import DaemonParams
 from rover_ctl.vocabulary import RoverMode, Severity
 
@@ -91,3 +91,11 @@ def test_a_loop_limited_by_a_slow_line_is_not_a_slow_loop():
         state = monitor.step(k * 0.1, expected_hz=11.0)
     assert not state.slow and state.target_hz == 11.0
     assert monitor.step(20.0, expected_hz=None).target_hz == 25.0
+
+
+def test_control_ticks_every_period_and_no_replay_after_a_gap():
+    ticks = ControlTicks(lambda: 0.04)
+    due = [t for t in (round(k * 0.01, 2) for k in range(20)) if ticks.due(t)]
+    assert due == [0.0, 0.04, 0.08, 0.12, 0.16]
+    assert ticks.due(1.0)  # after a 0.8 s gap: one step, not the twenty missed
+    assert not ticks.due(1.03) and ticks.due(1.04)

@@ -203,6 +203,35 @@ def ex_tracks(d: Daemon) -> list:
     return trace
 
 
+def ex_yielding(d: Daemon) -> list:
+    """The rover drives north at 1.2 m/s (when let) past obstacles crossing at several angles and
+    speeds; one track is lost halfway and must be waited for as last seen."""
+    from rover_ctl.navigation.tracks import Track
+
+    yielder, trace = d.autopilot.yielder, []
+    for ve, vn, speed_limit in ((0.8, 0.0, 1.2), (0.45, -0.45, 1.2), (0.5, -0.3, 1.2), (0.17, 0.0, 1.2), (0.12, 0.0, 1.2),
+                                (0.6, 0.3, 1.2), (0.6, 0.0, 0.4)):  # fmt: skip
+        yielder._yielding.clear()
+        north = 0.0
+        for k in range(150):
+            t = k * 0.1
+            hits, vv = (5 + k, 0.3 / (1 + k)) if k < 40 or ve < 0.5 else (0, 0.0)
+            tracks = [Track(1, t, -2.5 + ve * t, 3.5 + vn * t, ve, vn, vv=vv, hits=hits, born_en=(-2.5 - 4.0 * ve, 3.5))] if hits else []
+            decision = yielder.limit(0.0, north, math.pi / 2, speed_limit, tracks, t, heading_rad=math.pi / 2 - 0.01 * k)
+            speed = speed_limit if decision.speed_limit_mps is None else decision.speed_limit_mps
+            north += speed * 0.1
+            trace.append((decision.speed_limit_mps, decision.track_ident))
+    return trace
+
+
+def ex_yield_switch(d: Daemon) -> list:
+    """Whether echoes are tracked (the yielder's input) and the yielder acts at all."""
+    memory = d.autopilot.proximity
+    for k in range(20):
+        memory.add(k * 0.1, 0.0, 0.0, 0.0, 0, 2.0 + 0.05 * k)
+    return [len(memory.tracker.tracks), ex_yielding(d)[:60]]
+
+
 def mission_for_planner(d: Daemon) -> None:
     lat, lon = latlon(15.0, 0.5)
     circle = MissionItem(Cmd.NAV_FENCE_CIRCLE_EXCLUSION, frame=0, param1=3.0, x=lat, y=lon)
@@ -390,6 +419,8 @@ EXERCISES = {
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
     "link": (no_mission, ex_link, ("link.radio_txbuf_low_pct", "link.override_min_hz", "link.health_period_s", "link.rate_window_s",
                                    "link.radio_status_timeout_s")),
+    "yielding": (no_mission, ex_yielding, ("yielding.", "robot.footprint_length_m", "robot.footprint_width_m")),
+    "yield_switch": (no_mission, ex_yield_switch, ("yielding.enabled",)),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
@@ -405,6 +436,8 @@ def candidates(param: Param) -> list[float]:
         return [float(n) for n in param.choices if n != param.default]
     if param.kind is Kind.MASK:
         return [float(m) for m in (0, 1, 3, 255) if m != param.default]
+    if param.kind is Kind.BOOL:
+        return [0.0 if param.default else 1.0]
     d, lo, hi = param.default, param.minimum, param.maximum
     raw = [d * 2, d / 2, hi, lo, (lo + hi) / 2, d + 1, d - 1]
     out = []

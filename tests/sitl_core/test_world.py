@@ -126,6 +126,25 @@ def test_obstacle_motion_velocity_and_waypoint_loops():
     assert local["loop"].shape(2.5).centroid.x == pytest.approx(5.0, abs=1e-3)
 
 
+def test_a_motion_may_start_when_the_rover_first_arms():
+    doc = collection(
+        circle_feature(0, 10, 0.5, id="armed", motion={"type": "velocity", "velocity_mps": [1.0, 0.0], "start": "armed"}),
+        circle_feature(0, 0, 0.5, id="boot", motion={"type": "velocity", "velocity_mps": [1.0, 0.0]}),
+    )
+    world = parse_world(doc)
+    assert world == parse_world(world.to_geojson())  # "start" written back as read
+    local = world.local(FRAME)
+    armed, boot = local.obstacles
+    assert armed.ref_at(5.0) == pytest.approx((0.0, 10.0), abs=1e-6)  # waits, drawn where it is
+    assert boot.ref_at(5.0) == pytest.approx((5.0, 0.0), abs=1e-6)
+    local.armed(5.0)
+    local.armed(9.0)  # only the first arming counts
+    assert armed.ref_at(7.0) == pytest.approx((2.0, 10.0), abs=1e-6)
+    assert local.ray_cast((2.0, 0.0), math.pi / 2, 20.0, 7.0)[1] == "armed"
+    with pytest.raises(WorldError, match="motion start"):
+        parse_world(collection(circle_feature(0, 0, 0.5, motion={"type": "velocity", "velocity_mps": [1, 0], "start": "later"})))
+
+
 def test_ray_casting_against_circles_and_polygons():
     world = parse_world(collection(circle_feature(0, 10, 1.0, id="c"), square_feature(10, 0, 1.0, id="p"))).local(FRAME)
     north, east = math.pi / 2, 0.0

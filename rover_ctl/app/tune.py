@@ -1,0 +1,431 @@
+"""``rover-ctl tune``: CMA-ES over a rule base's membership functions, episodes on Dask.
+
+One run, in ``TuneOptions.out``:
+
+1. the genome (``rover_ctl.tuning.genome``): the rule base's free breakpoint values as a vector,
+   repaired into a valid rule base for any vector; CMA-ES (``cma``) searches it from the source
+   rule base (vector 0) with step ``sigma0`` in units of each variable's universe;
+2. each generation: ``population`` candidates, each driven on every training world (``worlds``
+   seeds per scenario, the same for every candidate) by the in-process episode runner
+   (``rover_ctl.tuning.episode``), one Dask task per episode; the score is the mean episode cost
+   (``rover_ctl.tuning.objective``) plus a small penalty for how far the repair moved the vector
+   (so that the search stays where candidates are what it asked for); generation 1 also drives
+   the source rule base on the same worlds, the baseline of the report;
+3. after every generation ``checkpoint.pkl`` (the CMA-ES state, the history, the best candidate)
+   is replaced atomically: the same command resumes where an interrupted run stopped;
+4. at the end the best candidate (lowest training score seen) and the source rule base are driven
+   on held-out seeds the search never used; ``tuned.toml`` (loads with ``--rulebase FILE``),
+   ``report.md`` (command, seeds, convergence, before/after table), ``convergence.png`` and
+   ``result.json`` are written.
+
+Seeds: from ``seed``, one ``random.Random`` draws distinct world seeds, the training ones first,
+then the held-out ones, so the held-out set never overlaps the training set.
+
+The Dask cluster: ``scheduler`` (``tcp://HOST:PORT``) attaches to a running one; otherwise a
+``LocalCluster`` of one single-threaded worker process per core listens on 127.0.0.1 only (its
+scheduler's HTTP server too, on a free port), without a dashboard, and is closed at the end (also
+on an error or Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import pickle
+import random
+import shlex
+import statistics
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from rover_ctl.tuning import scenarios as scenario_defs
+from rover_ctl.tuning.episode import Outcome
+from rover_ctl.tuning.genome import Genome, load_document
+from rover_ctl.tuning.objective import Weights, score
+from rover_ctl.tuning.tasks import run_episode_task
+from rover_ctl.tuning.toml_file import to_toml
+
+CHECKPOINT = "checkpoint.pkl"
+CHECKPOINT_VERSION = 1
+SIGMA0 = 0.1
+"""CMA-ES initial step, in units of each variable's universe (10 % of a range moves a breakpoint
+by 0.4 m on a 4 m rangefinder universe)."""
+REPAIR_PENALTY = 100.0
+"""Score added per squared unit of distance between a vector and its repaired form."""
+LOOPBACK = "127.0.0.1"
+SEED_SPACE = 1_000_000
+"""World seeds are drawn from 1..SEED_SPACE."""
+
+
+class TuneError(RuntimeError):
+    """A run that cannot start or go on (bad rule base, foreign checkpoint, no scheduler); one line."""
+
+
+@dataclass
+class TuneOptions:
+    rulebase: str
+    scenarios: list[str]
+    out: Path
+    worlds: int = 4
+    """Training worlds (seeds) per scenario."""
+    generations: int = 30
+    population: int = 8
+    holdout: int = 10
+    """Held-out worlds per scenario for the before/after table."""
+    seed: int = 1
+    scheduler: str | None = None
+    workers: int | None = None
+    """LocalCluster workers (default: one per core)."""
+    scale_outputs: bool = False
+    config_overrides: list[str] = field(default_factory=list)
+    command: str = ""
+    """The command line that started the run (for the report)."""
+
+    def settings(self) -> dict[str, Any]:
+        """What a checkpoint must agree on to be resumed (everything but the generation count,
+        which may be raised, and where the episodes run)."""
+        return {"rulebase": self.rulebase, "scenarios": list(self.scenarios), "worlds": self.worlds, "population": self.population,
+                "seed": self.seed, "scale_outputs": self.scale_outputs, "config_overrides": list(self.config_overrides)}  # fmt: skip
+
+
+@dataclass
+class Progress:
+    """What the live display shows."""
+
+    generation: int = 0
+    generations: int = 0
+    phase: str = "search"
+    done: int = 0
+    total: int = 0
+    episodes_per_s: float = math.nan
+    sim_x: float = math.nan
+    """Simulated seconds per wall second, over the current batch."""
+    workers: int = 0
+    best: float = math.nan
+    median: float = math.nan
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+
+def draw_seeds(seed: int, training: int, holdout: int) -> tuple[list[int], list[int]]:
+    """Distinct world seeds: ``training`` for the search, then ``holdout`` it never sees."""
+    drawn = random.Random(seed).sample(range(1, SEED_SPACE + 1), training + holdout)
+    return drawn[:training], drawn[training:]
+
+
+def check_options(o: TuneOptions) -> None:
+    """Refuse what cannot run, before any cluster starts (TuneError, one line)."""
+    unknown = sorted(set(o.scenarios) - set(scenario_defs.NAMES))
+    if unknown or not o.scenarios:
+        raise TuneError(f"--scenarios: unknown {', '.join(unknown) or '(none given)'} (known: {', '.join(scenario_defs.NAMES)})")
+    for name, value, low in (("--worlds", o.worlds, 1), ("--generations", o.generations, 1), ("--population", o.population, 2),
+                             ("--holdout", o.holdout, 1)):  # fmt: skip
+        if value < low:
+            raise TuneError(f"{name} {value}: expected a whole number >= {low}")
+    if o.workers is not None and o.workers < 1:
+        raise TuneError(f"--workers {o.workers}: expected a whole number >= 1")
+
+
+# ---- the cluster ------------------------------------------------------------------------------
+
+
+class Cluster:
+    """A Dask client on a LocalCluster (started and closed here) or on ``scheduler``."""
+
+    def __init__(self, scheduler: str | None, workers: int | None) -> None:
+        from distributed import Client, LocalCluster
+
+        self.cluster = None
+        try:
+            if scheduler:
+                self.client = Client(scheduler, timeout="10s")
+            else:
+                # Loopback only: the scheduler, the workers and the scheduler's small HTTP server (health and
+                # metrics routes, which it starts even without a dashboard) on a free port, no dashboard.
+                self.cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                            host=LOOPBACK, dashboard_address=None, silence_logs=50,
+                                            scheduler_kwargs={"dashboard_address": f"{LOOPBACK}:0"})  # fmt: skip
+                self.client = Client(self.cluster)
+        except (OSError, TimeoutError) as exc:
+            self.close()
+            raise TuneError(f"--scheduler {scheduler}: cannot connect: {exc}" if scheduler else f"cannot start a local Dask cluster: {exc}") from None
+
+    @property
+    def workers(self) -> int:
+        return len(self.client.scheduler_info().get("workers", {}))
+
+    def map_episodes(self, jobs: list[tuple[dict, str, str, int]], overrides: tuple[str, ...],
+                     on_done: Callable[[int, int, float], None] | None = None) -> list[Outcome]:  # fmt: skip
+        """Run ``(document, where, scenario, seed)`` jobs as tasks; outcomes in job order."""
+        from distributed import as_completed
+
+        futures = [self.client.submit(run_episode_task, doc, where, scenario, seed, overrides, pure=False)
+                   for doc, where, scenario, seed in jobs]  # fmt: skip
+        index = {f.key: i for i, f in enumerate(futures)}
+        results: list[Outcome | None] = [None] * len(futures)
+        sim_s = 0.0
+        for done, future in enumerate(as_completed(futures), start=1):
+            outcome = Outcome(**future.result())
+            results[index[future.key]] = outcome
+            sim_s += outcome.sim_s
+            if on_done:
+                on_done(done, len(futures), sim_s)
+        return results  # type: ignore[return-value]
+
+    def close(self) -> None:
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+# ---- checkpoint -------------------------------------------------------------------------------
+
+
+def _save_checkpoint(out: Path, state: dict[str, Any]) -> None:
+    tmp = out / (CHECKPOINT + ".tmp")
+    with open(tmp, "wb") as handle:
+        pickle.dump(state, handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, out / CHECKPOINT)
+
+
+def _load_checkpoint(out: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
+    """The run's own checkpoint, None if there is none; TuneError if it belongs to another run.
+    (A pickle: only ever read from the run folder this command wrote.)"""
+    path = out / CHECKPOINT
+    if not path.exists():
+        return None
+    try:
+        with open(path, "rb") as handle:
+            state = pickle.load(handle)
+    except Exception as exc:  # a truncated or foreign file
+        raise TuneError(f"{path}: not a readable checkpoint ({type(exc).__name__}); remove it or choose another --out") from None
+    if not isinstance(state, dict) or state.get("version") != CHECKPOINT_VERSION:
+        raise TuneError(f"{path}: not a checkpoint of this version; remove it or choose another --out")
+    if state.get("settings") != settings:
+        differ = sorted(k for k in settings if state["settings"].get(k) != settings[k])
+        raise TuneError(f"{path}: a checkpoint of another run (different {', '.join(differ)}); choose another --out")
+    return state
+
+
+# ---- the run ----------------------------------------------------------------------------------
+
+
+@dataclass
+class Prepared:
+    """A run checked and ready: the source document, its genome, the checkpoint if resuming."""
+
+    document: dict[str, Any]
+    where: str
+    genome: Genome
+    state: dict[str, Any] | None
+
+
+def prepare(o: TuneOptions) -> Prepared:
+    """Everything that can refuse the run, before a cluster starts (TuneError, one line)."""
+    check_options(o)
+    try:
+        document, where = load_document(o.rulebase)
+        genome = Genome(document, where, scale_outputs=o.scale_outputs)
+    except ValueError as exc:  # GenomeError, RuleBaseError
+        raise TuneError(str(exc)) from None
+    try:
+        o.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TuneError(f"--out {o.out}: {exc.strerror or exc}") from None
+    return Prepared(document, where, genome, _load_checkpoint(o.out, o.settings()))
+
+
+def tune(o: TuneOptions, on_progress: Callable[[Progress], None] | None = None, prepared: Prepared | None = None) -> dict[str, Any]:
+    """The whole run (module docstring); returns the result written to ``result.json``."""
+    import cma
+
+    prepared = prepared or prepare(o)
+    document, where, genome, state = prepared.document, prepared.where, prepared.genome, prepared.state
+    training, holdout = draw_seeds(o.seed, o.worlds, o.holdout)
+    overrides = tuple(o.config_overrides)
+    settings = o.settings()
+    if state is None:
+        es = cma.CMAEvolutionStrategy(genome.start(), SIGMA0, {"popsize": o.population, "seed": o.seed, "verbose": -9})
+        state = {"version": CHECKPOINT_VERSION, "settings": settings, "es": es, "history": [], "best": None,
+                 "episodes": 0, "sim_s": 0.0, "wall_s": 0.0}  # fmt: skip
+    es = state["es"]
+    progress = Progress(generation=len(state["history"]), generations=o.generations, history=state["history"])
+    if state["history"]:
+        progress.best = state["best"]["score"]
+        progress.median = state["history"][-1]["median"]
+
+    def report() -> None:
+        if on_progress:
+            on_progress(progress)
+
+    cluster = Cluster(o.scheduler, o.workers)
+    try:
+        progress.workers = cluster.workers
+        report()
+        while len(state["history"]) < o.generations:
+            started = time.perf_counter()
+            xs = es.ask()
+            docs = [genome.decode_document(x) for x in xs]
+            first = "source_score" not in state  # the source rule base on the same worlds: the baseline
+            jobs = [(doc, where, name, seed) for doc in docs + ([document] if first else []) for name in o.scenarios for seed in training]
+            progress.phase, progress.generation = "search", len(state["history"]) + 1
+            outcomes = cluster.map_episodes(jobs, overrides, _counter(progress, report, started, cluster))
+            per = len(o.scenarios) * len(training)
+            if first:
+                state["source_score"] = score(outcomes[len(xs) * per:])
+            scores = [score(outcomes[i * per:(i + 1) * per]) for i in range(len(xs))]
+            fitness = [s + REPAIR_PENALTY * float(np.sum((x - genome.repaired(x)) ** 2)) for s, x in zip(scores, xs)]
+            es.tell(xs, fitness)
+            best_i = int(np.argmin(scores))
+            if state["best"] is None or scores[best_i] < state["best"]["score"]:
+                state["best"] = {"score": scores[best_i], "generation": len(state["history"]) + 1, "x": list(map(float, xs[best_i])),
+                                 "document": docs[best_i]}  # fmt: skip
+            wall = time.perf_counter() - started
+            sim = sum(x.sim_s for x in outcomes)
+            state["episodes"] += len(outcomes)
+            state["sim_s"] += sim
+            state["wall_s"] += wall
+            state["history"].append({
+                "generation": len(state["history"]) + 1, "best": min(scores), "median": statistics.median(scores),
+                "source": state["source_score"],
+                "best_so_far": state["best"]["score"], "success": sum(x.success for x in outcomes) / len(outcomes),
+                "episodes": len(outcomes), "wall_s": round(wall, 2), "sim_s": round(sim, 1), "workers": cluster.workers,
+            })  # fmt: skip
+            _save_checkpoint(o.out, state)
+            progress.best, progress.median = state["best"]["score"], statistics.median(scores)
+            report()
+        # Before / after on the held-out worlds: the source rule base and the best candidate.
+        progress.phase = "held-out"
+        started = time.perf_counter()
+        best_doc = state["best"]["document"]
+        jobs = [(doc, where, name, seed) for doc in (document, best_doc) for name in o.scenarios for seed in holdout]
+        outcomes = cluster.map_episodes(jobs, overrides, _counter(progress, report, started, cluster))
+        holdout_wall = time.perf_counter() - started
+    finally:
+        cluster.close()
+    half = len(outcomes) // 2
+    result = _result(o, genome, state, training, holdout, outcomes[:half], outcomes[half:], holdout_wall)
+    _write_outputs(o, state, result, where)
+    return result
+
+
+def _counter(progress: Progress, report: Callable[[], None], started: float, cluster: Cluster) -> Callable[[int, int, float], None]:
+    last = [0.0]
+
+    def on_done(done: int, total: int, sim_s: float) -> None:
+        wall = time.perf_counter() - started
+        progress.done, progress.total = done, total
+        progress.episodes_per_s = done / wall if wall > 0 else math.nan
+        progress.sim_x = sim_s / wall if wall > 0 else math.nan
+        if time.perf_counter() - last[0] > 1.0 or done == total:
+            last[0] = time.perf_counter()
+            progress.workers = cluster.workers
+            report()
+
+    return on_done
+
+
+def _summary(outcomes: list[Outcome]) -> dict[str, Any]:
+    ok = [x for x in outcomes if x.success]
+    return {
+        "episodes": len(outcomes), "success_rate": sum(x.success for x in outcomes) / len(outcomes),
+        "collisions": sum(x.collisions > 0 for x in outcomes), "timeouts": sum(x.timed_out for x in outcomes),
+        "duration_s": statistics.fmean(x.duration_s for x in ok) if ok else math.nan,
+        "path_length_m": statistics.fmean(x.path_length_m for x in ok) if ok else math.nan,
+        "score": score(outcomes),
+    }  # fmt: skip
+
+
+def _result(o: TuneOptions, genome: Genome, state: dict[str, Any], training: list[int], holdout: list[int],
+            before: list[Outcome], after: list[Outcome], holdout_wall_s: float) -> dict[str, Any]:  # fmt: skip
+    table = []
+    for name in o.scenarios:
+        b = _summary([x for x in before if x.scenario == name])
+        a = _summary([x for x in after if x.scenario == name])
+        table.append({"scenario": name, "source": b, "tuned": a})
+    return {
+        "rulebase": o.rulebase, "scenarios": o.scenarios, "generations": len(state["history"]), "population": o.population,
+        "worlds": o.worlds, "seed": o.seed, "training_seeds": training, "holdout_seeds": holdout, "genome": genome.describe(),
+        "weights": asdict(Weights()), "source_score": state["source_score"], "best": {k: v for k, v in state["best"].items() if k != "document"},
+        "history": state["history"], "episodes": state["episodes"], "search_wall_s": round(state["wall_s"], 1),
+        "search_sim_s": round(state["sim_s"], 1), "holdout_wall_s": round(holdout_wall_s, 1), "holdout": table,
+        "holdout_runs": {"source": [x.to_dict() for x in before], "tuned": [x.to_dict() for x in after]},
+        "command": o.command, "config_overrides": o.config_overrides,
+    }  # fmt: skip
+
+
+def _fmt(value: float, spec: str) -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
+
+
+def _write_outputs(o: TuneOptions, state: dict[str, Any], result: dict[str, Any], where: str) -> None:
+    best = state["best"]
+    comment = [f"Tuned from {where} by `rover-ctl tune` (generation {best['generation']}, training score {best['score']:.2f}).",
+               f"Reproduce: {o.command}", "Report: report.md beside this file."]  # fmt: skip
+    (o.out / "tuned.toml").write_text(to_toml(best["document"], comment), encoding="utf-8")
+    (o.out / "result.json").write_text(json.dumps(result, indent=1, default=float) + "\n", encoding="utf-8")
+    _plot(o.out / "convergence.png", state["history"])
+    lines = [
+        f"# rover-ctl tune: {o.rulebase} on {', '.join(o.scenarios)}", "",
+        f"Reproduce: `{o.command}`", "",
+        f"- search: CMA-ES (sigma0 {SIGMA0} of each universe) over {result['genome']}; population {o.population}, "
+        f"{result['generations']} generations, {o.worlds} training worlds per scenario, {result['episodes']} episodes, "
+        f"{result['search_sim_s']:.0f} sim s in {result['search_wall_s']:.0f} wall s",
+        f"- training seeds: {result['training_seeds']}",
+        f"- held-out seeds (never used in the search): {result['holdout_seeds']}",
+        f"- objective (per episode, lower is better): {Weights().collision_cost:g} x collisions + {Weights().incomplete_cost:g} x not complete "
+        f"+ {Weights().time_cost_per_s:g} x seconds + {Weights().path_cost_per_m:g} x metres; a candidate's score is the mean",
+        f"- best candidate: generation {best['generation']}, training score {best['score']:.2f} "
+        f"(the source rule base on the same worlds: {state['source_score']:.2f})", "",
+        "## Held-out worlds: source vs tuned (in-process runner)", "",
+        "| scenario | rule base | episodes | success | collisions | timeouts | time (s) | path (m) | score |", "|---|---|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for row in result["holdout"]:
+        for label, s in (("source", row["source"]), ("tuned", row["tuned"])):
+            lines.append(f"| {row['scenario']} | {label} | {s['episodes']} | {s['success_rate']:.0%} | {s['collisions']} | {s['timeouts']} | "
+                         f"{_fmt(s['duration_s'], '.1f')} | {_fmt(s['path_length_m'], '.1f')} | {s['score']:.1f} |")  # fmt: skip
+    lines += ["", "Time and path are means over successful episodes. The figures come from the fast runner; confirm in the "
+              "emulator-in-the-loop benchmark (`python -m bench navigation --rulebase tuned.toml`).", "",
+              "## Convergence", "", "![convergence](convergence.png)", "",
+              "| generation | best | median | best so far | success | episodes | wall (s) |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for h in state["history"]:
+        lines.append(f"| {h['generation']} | {h['best']:.2f} | {h['median']:.2f} | {h['best_so_far']:.2f} | {h['success']:.0%} | {h['episodes']} | {h['wall_s']} |")
+    (o.out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _plot(path: Path, history: list[dict[str, Any]]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    gens = [h["generation"] for h in history]
+    ax.plot(gens, [h["best"] for h in history], "o-", label="best of generation")
+    ax.plot(gens, [h["median"] for h in history], "s--", label="median of generation")
+    ax.plot(gens, [h["best_so_far"] for h in history], "-", color="k", lw=1, label="best so far")
+    ax.axhline(history[0]["source"], color="grey", ls=":", label="source rule base")
+    ax.set_xlabel("generation")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("score (mean episode cost, log)")
+    ax.set_yscale("log")  # a collision costs 2000, a good run about 50: both on one plot
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def command_line(argv: list[str]) -> str:
+    """The command as typed, for the report."""
+    return shlex.join(["rover-ctl", *argv]) if argv else shlex.join(sys.argv)

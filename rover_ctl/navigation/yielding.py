@@ -1,0 +1,148 @@
+"""Yielding to crossing traffic: the speed along the path at which no moving obstacle comes too close.
+
+Pure: no clock, no I/O. The autopilot asks ``Yielder.limit`` every control step, with the moving
+obstacle tracks (``rover_ctl.navigation.tracks``), and caps the navigator's speed with the answer.
+
+**Why.** The fuzzy rule base reacts to where an obstacle *is*: one crossing from the left reads
+as an obstacle on the left and the rover turns right, which is where a crossing obstacle is going.
+A driver does the opposite: keeps the line and lets it pass. This is the path-velocity
+decomposition of Kant and Zucker (1986): the path is the planner's and the navigator's, and only
+the speed along it is chosen so as to miss the moving obstacles.
+
+**Method.** The rover at ``p`` is taken to go on along its path, the unit vector ``u`` towards the
+navigator's target (the carrot: during an evasive turn the heading says little about where the
+rover is going), at a fraction ``s`` of the speed it was given, ``V``; a track at ``q`` with velocity ``w`` goes on at ``w``.
+Their separation ``d(tau) = (q - p) + (w - s V u) tau`` is closest at
+
+    tau* = clip(-(r . v) / (v . v), 0, T)   with r = q - p, v = w - s V u
+
+and the rover is in conflict with the track when ``|d(tau*)| < R``, ``R = robot radius +
+margin_m`` (the track is an echo on the obstacle's near surface, so its own size is not added).
+The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that is in
+conflict with no track; ``None`` (no limit) when full speed is. When every fraction is in conflict
+(an obstacle whose estimated course would reach even a stopped rover), the fraction that keeps it
+farthest away: full speed only when that is the one (passing well ahead of it), never by default.
+
+Only tracks that *cross* are yielded to: the component of ``w`` across ``u`` of at least
+``min_cross_mps`` and at least ``sin(min_cross_deg)`` of its speed (a track's velocity is noisy: a
+walker coming head-on must not read as crossing). An obstacle walking along the rover's line
+(ahead and slower: to be overtaken; towards it: head-on) is steered around like a static one:
+waiting behind it would never end, and one walking at a stopped rover walks into it.
+
+Only tracks the tracker is sure of start a yield: at least ``min_hits`` echoes, a velocity
+standard deviation of at most ``max_speed_sd_mps``, and ``min_travel_m`` travelled since the first
+echo (as the rover drives past or turns by a static obstacle its echo slides over the obstacle's
+face and makes tracks that seem to move, but never far from where they started). And none starts
+while the rover points more than ``max_heading_off_deg`` away from its course (mid-turn around
+something): the model has it going along the course, and a turning rover's beams sweep over
+surfaces and give its tracks velocities that are not there.
+
+**Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
+full speed clears it by ``release_margin_m`` more, or its course comes within half of
+``min_cross_deg`` of the line (the maturity tests no longer apply), so that track noise does not
+make the rover lurch. A yielded-to obstacle often loses its track while it passes (its echo jumps
+across its surface from one beam to the next, beyond the tracker's gate, and a new track starts
+with no velocity). So the last estimate of every track yielded to is kept, and while its track is
+gone (not merely no longer moving: that one is static now, and released) it stands in for it,
+moving on at its last velocity, for at most ``max_wait_s``: the rover waits until that obstacle
+has passed, not until it was lost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Collection, Iterable
+
+from rover_ctl.config import YieldParams
+from rover_ctl.navigation.tracks import Track
+
+
+@dataclass(frozen=True)
+class YieldDecision:
+    """A speed cap for this step, and the track it yields to (None: drive on)."""
+
+    speed_limit_mps: float | None
+    track_ident: int | None = None
+
+
+def _snapshot(track: Track) -> Track:
+    """A copy of a track's estimate (the tracker goes on updating its own)."""
+    return Track(track.ident, track.time_s, track.east_m, track.north_m, track.v_east_mps, track.v_north_mps)
+
+
+def closest_approach_m(r_east: float, r_north: float, v_east: float, v_north: float, horizon_s: float) -> float:
+    """Smallest ``|r + v tau|`` over ``tau`` in ``[0, horizon_s]`` (relative position and velocity)."""
+    vv = v_east * v_east + v_north * v_north
+    tau = 0.0 if vv <= 1e-12 else min(max(-(r_east * v_east + r_north * v_north) / vv, 0.0), horizon_s)
+    return math.hypot(r_east + v_east * tau, r_north + v_north * tau)
+
+
+class Yielder:
+    """Chooses the speed along the path that lets crossing obstacles pass (see the module docstring)."""
+
+    def __init__(self, params: YieldParams, robot_radius_m) -> None:
+        """``params`` is read at every call; ``robot_radius_m`` is a function giving the radius in force."""
+        self.params = params
+        self._robot_radius_m = robot_radius_m
+        self._yielding: dict[int, Track] = {}
+        """Tracks yielded to: the last estimate of each (a copy), kept while it is in conflict."""
+
+    def limit(self, east_m: float, north_m: float, course_rad: float, speed_mps: float,
+              tracks: Iterable[Track], time_s: float, alive: Collection[int] = (),
+              heading_rad: float | None = None) -> YieldDecision:  # fmt: skip
+        """The speed cap for a rover at (``east_m``, ``north_m``) going along ``course_rad`` (ENU,
+        towards its target) at ``speed_mps``, among the moving ``tracks``; ``alive`` names every
+        track the tracker still has, moving or not (one that stopped moving is no longer waited for;
+        one that is gone is, as last seen). ``heading_rad``: where the rover points; no new yield
+        starts while it is more than ``max_heading_off_deg`` off the course."""
+        p = self.params
+        if not p.enabled or speed_mps <= 0.0:
+            self._yielding.clear()
+            return YieldDecision(None)
+        live = {t.ident: t for t in tracks}
+        self._yielding = {i: live.get(i, t) for i, t in self._yielding.items()
+                          if i in live or (i not in alive and time_s - t.time_s <= p.max_wait_s)}  # fmt: skip
+        candidates = {**{i: t for i, t in self._yielding.items() if i not in live}, **live}  # lost ones move on as last seen
+        ue, un = math.cos(course_rad), math.sin(course_rad)
+        radius_m = self._robot_radius_m() + p.margin_m
+        min_share = math.sin(math.radians(p.min_cross_deg))
+        off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(p.max_heading_off_deg)
+        half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
+        crossing = []
+        for ident, track in candidates.items():
+            e, n = track.position_at(time_s)
+            across_mps = abs(track.v_north_mps * ue - track.v_east_mps * un)
+            if ident in self._yielding:  # already yielded to: kept while it still crosses at half the angle
+                if ident in live and across_mps < half_share * track.speed_mps:
+                    continue
+            elif (off_course or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
+                  or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
+                continue
+            crossing.append((ident, e - east_m, n - north_m, track.v_east_mps, track.v_north_mps))
+        if not crossing:
+            self._yielding = {}
+            return YieldDecision(None)
+        steps = max(int(p.speed_steps), 1)
+        best_fraction, best_m = 1.0, -math.inf
+        for fraction in (i / steps for i in range(steps, -1, -1)):
+            vr_e, vr_n = fraction * speed_mps * ue, fraction * speed_mps * un
+            worst_m = math.inf  # the closest any crossing track comes, less the margin it needs
+            for ident, re, rn, we, wn in crossing:
+                clear_m = radius_m + (p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0)
+                worst_m = min(worst_m, closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - clear_m)
+            if worst_m > best_m + 1e-9:
+                best_fraction, best_m = fraction, worst_m
+            if worst_m >= 0.0:
+                break
+        if best_fraction >= 1.0:
+            self._yielding = {}
+            return YieldDecision(None)
+        conflicts = [c for c in crossing if self._conflicts(c, speed_mps, ue, un, radius_m)] or crossing
+        self._yielding = {c[0]: _snapshot(candidates[c[0]]) for c in conflicts}
+        return YieldDecision(best_fraction * speed_mps, min(self._yielding))
+
+    def _conflicts(self, track: tuple, speed_mps: float, ue: float, un: float, radius_m: float) -> bool:
+        """Whether the track is in conflict with the rover at full speed (one it is yielding to)."""
+        _, re, rn, we, wn = track
+        return closest_approach_m(re, rn, we - speed_mps * ue, wn - speed_mps * un, self.params.horizon_s) < radius_m

@@ -1,0 +1,68 @@
+"""The in-process episode runner reproduces a lockstep SITL run (emulator and daemon as processes).
+
+Same scenario, seed and rule base; the runner starts its mission at the sim time the SITL run's
+ground station got AUTO started (it arms after wall-clock retries, so that time varies from run to
+run, and moving obstacles move on sim time). Stated tolerance: the same success and collision
+count, path length within ``PATH_TOLERANCE`` and mission time within ``TIME_TOLERANCE`` (measured
+on these worlds: within 0.5 % and 1 %; GPS and sensor noise are drawn per sample, and the runner
+hands readings over as they are sampled instead of on the emulator's stream grid).
+
+The worlds: two of ``scattered`` (static obstacles) and two of ``crossing`` (2-5 moving drums).
+Not ``moving``: its two drums meet the rover at a point that depends on the start time, and at
+some start times the rover grazes one (67 % success in the navigation benchmark), where any
+difference in a few centimetres flips the outcome either way.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.bench_navigation import ACCEPTANCE_RADIUS_M, TIME_BUDGET_S, write_inputs
+from rover_ctl.app.report import read_jsonl
+from rover_ctl.app.sim import SimOptions, simulate
+from rover_ctl.fuzzy import load_rulebase
+from rover_ctl.tuning.episode import Episode, episode_config
+from rover_ctl.tuning.scenarios import scenarios
+from rover_ctl.vocabulary import RoverMode
+
+PATH_TOLERANCE = 0.05
+TIME_TOLERANCE = 0.20
+"""Since yielding is on by default, a rover passing static drums now and then yields to an echo
+sliding over one (docs/perception.md) and stands for a few seconds; when it does depends on GPS
+noise, which differs between the two runs (the SITL run arms on the wall clock). Scattered seed 3
+took 60.2 s in the runner against 69.4 s in SITL once, with the same path within 5%; before
+yielding the two agreed within 1%."""
+
+
+@pytest.mark.sitl
+@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 1), ("crossing", 2)])
+def test_the_runner_reproduces_a_lockstep_sitl_run(tmp_path, name, seed):
+    scenario = scenarios(seed)[name]
+    mission, world = write_inputs(scenario, tmp_path)
+    out = tmp_path / "run"
+    sitl = simulate(SimOptions(mission=mission, out=out, world=world, obstacles=scenario.scatter or None, seed=seed, rulebase="default",
+                               timeout_s=TIME_BUDGET_S, config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}"]),
+                    plots=False)  # fmt: skip
+    started = next(e["t_s"] for e in read_jsonl(out / "events.jsonl") if e["type"] == "mode" and e["mode"] == RoverMode.AUTO)
+
+    runner = Episode(load_rulebase("default"), name, seed, episode_config(), start_s=started).run()
+
+    assert (runner.success, runner.collisions) == (sitl["success"], sitl["collisions"]), (runner, sitl)
+    assert runner.path_length_m == pytest.approx(sitl["path_length_m"], rel=PATH_TOLERANCE), (runner, sitl)
+    assert runner.duration_s == pytest.approx(sitl["duration_s"], rel=TIME_TOLERANCE), (runner, sitl)
+
+
+def test_the_runner_is_deterministic_and_reports_a_collision():
+    rulebase = load_rulebase("paper")  # the paper's controller drives into the cul-de-sac's wall
+    first = Episode(rulebase, "cul_de_sac", 3, episode_config(), stop_on_collision=True, time_budget_s=60.0).run()
+    again = Episode(rulebase, "cul_de_sac", 3, episode_config(), stop_on_collision=True, time_budget_s=60.0).run()
+    assert first == again
+    assert first.collisions == 1 and not first.success and not first.timed_out and not first.complete
+    assert first.duration_s < 60.0  # it stopped at the collision
+
+
+def test_an_unknown_scenario_or_estimator_is_refused():
+    with pytest.raises(ValueError, match="unknown scenario"):
+        Episode(load_rulebase("default"), "moon", 1)
+    with pytest.raises(ValueError, match="estimator"):
+        Episode(load_rulebase("default"), "open", 1, estimator="magic")

@@ -1,0 +1,141 @@
+"""The yielder: the speed along the path that lets crossing obstacles pass (pure, no sockets)."""
+
+from __future__ import annotations
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from rover_ctl.config import YieldParams
+from rover_ctl.navigation.tracks import Track
+from rover_ctl.navigation.yielding import Yielder, closest_approach_m
+
+NORTH = math.pi / 2
+ROBOT_RADIUS_M = 0.3
+
+
+def yielder(**changes) -> Yielder:
+    params = YieldParams(enabled=True)
+    for key, value in changes.items():
+        setattr(params, key, value)
+    return Yielder(params, lambda: ROBOT_RADIUS_M)
+
+
+def drive(y: Yielder, track_at, cruise_mps: float = 1.2, duration_s: float = 15.0, dt_s: float = 0.05):
+    """The rover drives north from the origin at the speed the yielder lets it; ``track_at(t)``
+    gives the track seen at t (or None). Returns (closest true distance, limits seen, north reached)."""
+    north, closest, limits = 0.0, math.inf, []
+    for k in range(int(duration_s / dt_s)):
+        t = k * dt_s
+        track = track_at(t)
+        decision = y.limit(0.0, north, NORTH, cruise_mps, [track] if track else [], t)
+        limits.append(decision.speed_limit_mps)
+        north += (cruise_mps if decision.speed_limit_mps is None else decision.speed_limit_mps) * dt_s
+        truth = crossing(t)
+        closest = min(closest, math.hypot(truth.east_m, truth.north_m - north))
+    return closest, limits, north
+
+
+def crossing(t: float) -> Track:
+    """A pedestrian from the west crossing the rover's line 5 m ahead at 0.8 m/s, timed to meet it."""
+    return Track(1, t, -3.4 + 0.8 * t, 5.0, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0))
+
+
+def test_closest_approach():
+    assert closest_approach_m(0.0, 5.0, 0.0, -1.0, 10.0) == 0.0  # head-on
+    assert math.isclose(closest_approach_m(2.0, 5.0, 0.0, -1.0, 10.0), 2.0)  # passes 2 m to the side
+    assert math.isclose(closest_approach_m(0.0, 5.0, 0.0, -1.0, 2.0), 3.0)  # not within the horizon
+    assert math.isclose(closest_approach_m(0.0, 5.0, 0.0, 1.0, 10.0), 5.0)  # moving away: now is closest
+
+
+def test_a_pedestrian_crossing_ahead_is_waited_for_and_the_rover_goes_on_behind_it():
+    without_yield = drive(yielder(enabled=False), crossing)
+    closest, limits, north = drive(yielder(), crossing)
+    assert without_yield[0] < 0.5  # at cruise speed the two meet
+    assert closest >= ROBOT_RADIUS_M + 0.4  # yielding keeps the margin (less a little for the slowing)
+    assert min(limit for limit in limits if limit is not None) < 1.2  # it slowed down...
+    assert limits[-1] is None and north > 10.0  # ...and drove on once the pedestrian had passed
+
+
+def test_a_pedestrian_stepping_out_close_ahead_stops_the_rover():
+    """The later a crossing pedestrian is seen, the slower the rover must go: 2.5 m ahead it may
+    go on at half speed, 1.2 m ahead only a stop lets it pass."""
+    speeds = [yielder().limit(0.0, 0.0, NORTH, 1.2, [Track(1, 0.0, -1.2, ahead, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0))], 0.0).speed_limit_mps
+              for ahead in (2.5, 1.5, 1.2)]  # fmt: skip
+    assert speeds == sorted(speeds, reverse=True) and speeds[0] >= 0.6 and speeds[-1] == 0.0
+
+
+def test_a_lost_track_is_waited_for_as_last_seen():
+    """The track vanishes as the pedestrian reaches the line: the rover still waits for it."""
+    closest, limits, _ = drive(yielder(), lambda t: crossing(t) if t < 3.0 else None)
+    assert closest >= ROBOT_RADIUS_M + 0.4
+    assert limits[int(4.0 / 0.05)] is not None  # still yielding a second after the loss
+
+
+def test_the_wait_for_a_lost_track_is_bounded():
+    _, limits, _ = drive(yielder(max_wait_s=0.5), lambda t: crossing(t) if t < 3.0 else None)
+    assert limits[int(3.6 / 0.05)] is None
+
+
+def test_head_on_and_walking_ahead_are_not_yielded_to():
+    """An obstacle on the rover's line (head-on, or ahead and slower) is steered around, not
+    waited for: waiting for it never ends, or it walks into a stopped rover."""
+    y = yielder()
+    head_on = Track(1, 0.0, 0.1, 6.0, 0.1, -0.8, hits=20, born_en=(-9.0, 0.0))  # its velocity wobbles 7 degrees off the line
+    ahead = Track(2, 0.0, -0.1, 3.0, -0.05, 0.4, hits=20, born_en=(-9.0, 0.0))
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [head_on], 0.0).speed_limit_mps is None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [ahead], 0.0).speed_limit_mps is None
+
+
+def test_when_no_speed_is_free_the_one_that_keeps_the_obstacle_farthest():
+    """Crossing 1 m ahead, 1.5 m off the line: every speed comes within the margin (full speed
+    0.69 m, a stop 1.0 m), so the rover stops rather than drive on into its path."""
+    at_the_rover = Track(1, 0.0, -1.5, 1.0, 0.8, 0.0, hits=20, born_en=(-9.0, 1.0))
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [at_the_rover], 0.0).speed_limit_mps == 0.0
+
+
+def test_unsure_tracks_are_not_yielded_to():
+    """Few echoes, or a velocity still uncertain: no yield (a sliding echo makes such tracks)."""
+    young = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=3)
+    unsure = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0), vv=0.5**2)
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [young], 0.0).speed_limit_mps is None
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [unsure], 0.0).speed_limit_mps is None
+    wandering = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-1.5, 1.4))  # 0.3 m from its first echo
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [wandering], 0.0).speed_limit_mps is None
+
+
+def test_no_new_yield_while_the_rover_points_off_its_course():
+    """Mid-turn around something (heading 40 degrees off the course): its tracks' velocities are
+    swept echoes, so no yield starts; once one has started it holds through a turn."""
+    track = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
+    y = yielder()
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(10.0)).speed_limit_mps is not None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.05, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is not None
+
+
+def test_disabled_or_standing_still_no_limit():
+    track = crossing(3.0)
+    assert yielder(enabled=False).limit(0.0, 0.0, NORTH, 1.2, [track], 3.0).speed_limit_mps is None
+    assert yielder().limit(0.0, 0.0, NORTH, 0.0, [track], 3.0).speed_limit_mps is None
+
+
+@settings(max_examples=300, deadline=None)
+@given(start_east=st.floats(-6.0, -1.5), north_m=st.floats(2.0, 8.0), speed=st.floats(0.3, 1.0),
+       side=st.sampled_from((-1.0, 1.0)))
+def test_perpendicular_crossing_traffic_never_comes_within_the_robot_radius(start_east, north_m, speed, side):
+    """Whatever the timing, a rover that obeys the limit is never touched by a perpendicular
+    crosser whose track it sees from the start (truth = track)."""
+    def track_at(t: float) -> Track:
+        return Track(1, t, side * (start_east + speed * t), north_m, side * speed, 0.0, hits=20, born_en=(-9.0, 0.0))
+
+    y = yielder()
+    north, closest = 0.0, math.inf
+    for k in range(300):
+        t = k * 0.05
+        track = track_at(t)
+        decision = y.limit(0.0, north, NORTH, 1.2, [track], t)
+        north += (1.2 if decision.speed_limit_mps is None else decision.speed_limit_mps) * 0.05
+        closest = min(closest, math.hypot(track.east_m, track.north_m - north))
+    assert closest > ROBOT_RADIUS_M
