@@ -68,7 +68,7 @@ LOG_COLUMNS = (
     "est_healthy", "gps_ok", "goal_seq", "goal_east_m", "goal_north_m", "target_east_m", "target_north_m",
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
-    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "latency_ms",
+    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
@@ -154,8 +154,7 @@ class Autopilot:
         self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m,
                                         tracking=lambda: config.yielding.enabled)  # fmt: skip
         self.yielder = Yielder(config.yielding, lambda: math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0)
-        self.passage = Passage(config.passage, lambda: config.proximity.memory_s, lambda: robot.footprint_length_m,
-                               lambda: robot.footprint_width_m)  # fmt: skip
+        self.passage = Passage(config.passage, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
         self.mode = RoverMode.HOLD
         self.armed = False
         self.home: Home | None = None
@@ -204,6 +203,7 @@ class Autopilot:
     def on_wheels(self, reading: WheelDistance) -> None:
         self._sensor_seen(reading.time_s)
         self.wheels.on_wheels(reading)
+        self.passage.odometry.on_wheels(reading.left_m, reading.right_m)
         if self.wheel_map.verdict is None:
             self.wheel_map.on_wheels(reading)
             if self.wheel_map.verdict == "reversed":
@@ -215,6 +215,7 @@ class Autopilot:
     def on_attitude(self, reading: Attitude) -> None:
         self._sensor_seen(reading.time_s)
         self.wheel_map.on_attitude(reading)
+        self.passage.odometry.on_gyro(reading.time_s, reading.yaw_rate_radps)
 
     def _sensor_seen(self, t_s: float) -> None:
         if self._sensors_since_s is None:
@@ -512,24 +513,23 @@ class Autopilot:
             if reading.time_s > self._remembered_s.get(orientation, -math.inf):
                 self._remembered_s[orientation] = reading.time_s
                 self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
-                if self.config.passage.enabled:  # no cost when off
-                    e, n, axis = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
-                    self.passage.beam(reading.time_s, (e, n), axis, reading.range_m, reading.max_range_m)
-        target, ignore, distance_m = guidance.target_en, None, guidance.remaining_m
-        gap = None
-        if self.config.passage.enabled:
-            gap = self.passage.update(t_s, (pose.east_m, pose.north_m), pose.heading_rad, target, self.proximity.echoes(t_s))
+                if self.config.passage.enabled:
+                    self.passage.on_range(reading.time_s, orientation, reading.range_m)
+        if self.config.passage.enabled:  # a narrow passage: the manoeuvre drives, the rule base waits
+            drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal)
+            for text in self.passage.events:
+                self._say(text)
+            self.passage.events.clear()
+            if drive is not None:
+                self._commanded_speed_mps = abs(drive.speed_mps)
+                turn_mps = drive.yaw_rate_radps * self.config.robot.track_m / 2.0
+                left, right = self._speed_to_rpm(drive.speed_mps - turn_mps), self._speed_to_rpm(drive.speed_mps + turn_mps)
+                row.update(passage=drive.state, left_set_rpm=left, right_set_rpm=right)
+                return self.wheels.step(t_s, dt_s, left, right)
         else:
             self.passage.reset()
-        for text in self.passage.events:
-            self._say(text)
-        self.passage.events.clear()
-        if gap is not None:  # a narrow passage: its centre line steers, its edges are set aside, slowly
-            target, ignore, speed_mps = gap.target_en, gap.ignore, min(speed_mps, gap.speed_limit_mps)
-            distance_m = distance_m if gap.target_distance_m is None else gap.target_distance_m
-            row.update(target_east_m=target[0], target_north_m=target[1], speed_limit_mps=speed_mps)
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()},
-                                       pose.speed_mps, ignore)  # fmt: skip
+                                       pose.speed_mps)  # fmt: skip
         for orientation in decision.blocked_orientations:
             ranges.pop(orientation, None)  # a silent rangefinder: the navigator counts that side as blocked
         if decision.speed_limit_mps is not None:  # a blind side, or rangefinders slower than the speed needs
@@ -541,14 +541,14 @@ class Autopilot:
         if self.config.yielding.enabled:  # crossing traffic: slow or stop on the path and let it pass
             rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
             tracks = self.proximity.tracker.moving(t_s, rover_velocity)
-            course = math.atan2(target[1] - pose.north_m, target[0] - pose.east_m)
+            course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
             alive = {track.ident for track in self.proximity.tracker.tracks}
             yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive, pose.heading_rad)
             if yielded.speed_limit_mps is not None:
                 speed_mps = yielded.speed_limit_mps
                 row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
-        nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, target[0], target[1],
-                                  ranges, speed_mps, distance_m)  # fmt: skip
+        nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
+                                  ranges, speed_mps, guidance.remaining_m)  # fmt: skip
         self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
         row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip

@@ -54,7 +54,7 @@ class ObstacleMemory:
         self.params = params
         self._length_m = footprint_length_m if callable(footprint_length_m) else (lambda: footprint_length_m)
         self._width_m = footprint_width_m if callable(footprint_width_m) else (lambda: footprint_width_m)
-        self._points = np.empty((0, 6))  # rows: time_s, east_m, north_m, track ident, range_m, beam axis (rad, ENU)
+        self._points = np.empty((0, 4))  # rows: time_s, east_m, north_m, track ident
         self.tracker = ObstacleTracker(params)
         self._tracking = tracking
 
@@ -66,10 +66,6 @@ class ObstacleMemory:
         c, s = math.cos(heading_rad), math.sin(heading_rad)
         return east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + body
 
-    def sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
-        """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
-        return self._sensor_pose(orientation, east_m, north_m, heading_rad)
-
     def add(self, time_s: float, east_m: float, north_m: float, heading_rad: float, orientation: int, range_m: float) -> None:
         """Remember the echo of one reading taken with the rover at this pose (inf: no echo)."""
         if not math.isfinite(range_m) or range_m < 0.0:
@@ -78,30 +74,17 @@ class ObstacleMemory:
         east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
         tracked = self.params.horizon_s > 0.0 or self._tracking()
         ident = self.tracker.add(time_s, east, north) if tracked else 0  # no cost when off
-        self._points = np.vstack((self._points, (time_s, east, north, ident, range_m, axis)))
-
-    def echoes(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The remembered echoes: (east, north) rows, the range each was measured at and its
-        beam's axis (rad, ENU), for whoever needs their geometry (``rover_ctl.navigation.gaps``)."""
-        live = self._points[self._points[:, 0] > time_s - self.params.memory_s]
-        return live[:, 1:3], live[:, 4], live[:, 5]
+        self._points = np.vstack((self._points, (time_s, east, north, ident)))
 
     def ranges(self, time_s: float, east_m: float, north_m: float, heading_rad: float, latest_m: dict[int, float],
-               speed_mps: float = 0.0, ignore: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
-               ) -> dict[int, float]:  # fmt: skip
+               speed_mps: float = 0.0) -> dict[int, float]:  # fmt: skip
         """``latest_m`` with each sensor's range shortened to the nearest remembered echo in its
         sector (and predicted path, see the module docstring; ``speed_mps`` is the rover's
-        forward speed, which tells echoes sliding along a surface beside it from moving obstacles).
-        ``ignore(points_en, ranges_m, axes_rad) -> mask`` sets echoes aside, remembered ones and
-        the latest readings alike (a narrow passage's edges, ``rover_ctl.navigation.gaps``)."""
+        forward speed, which tells echoes sliding along a surface beside it from moving obstacles)."""
         self._points = self._points[self._points[:, 0] > time_s - self.params.memory_s]
-        kept = np.ones(len(self._points), dtype=bool)
-        if ignore is not None:
-            latest_m = self._without(latest_m, east_m, north_m, heading_rad, ignore)
-            kept = ~ignore(self._points[:, 1:3], self._points[:, 4], self._points[:, 5])
-        points = self._points[kept, 1:3]
+        points = self._points[:, 1:3]
         if self.params.horizon_s > 0.0:
-            points = self._predicted(time_s, (speed_mps * math.cos(heading_rad), speed_mps * math.sin(heading_rad)), kept)
+            points = self._predicted(time_s, (speed_mps * math.cos(heading_rad), speed_mps * math.sin(heading_rad)))
         if not len(points):
             return dict(latest_m)
         out = {}
@@ -116,26 +99,14 @@ class ObstacleMemory:
             out[orientation] = min(range_m, nearest) if range_m is not None and not math.isnan(range_m) else range_m
         return out
 
-    def _without(self, latest_m: dict[int, float], east_m: float, north_m: float, heading_rad: float, ignore) -> dict[int, float]:
-        """The latest readings with those whose echo ``ignore`` sets aside read as no echo."""
-        out = dict(latest_m)
-        for orientation, range_m in latest_m.items():
-            if range_m is None or not math.isfinite(range_m) or range_m < 0.0:
-                continue
-            e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
-            point = np.array([[e + range_m * math.cos(axis), n + range_m * math.sin(axis)]])
-            if ignore(point, np.array([range_m]), np.array([axis]))[0]:
-                out[orientation] = math.inf
-        return out
-
-    def _predicted(self, time_s: float, rover_velocity_en: tuple[float, float], kept: np.ndarray) -> np.ndarray:
-        """(east, north) rows: the ``kept`` remembered echoes, those of moving tracks replaced by
-        their predicted paths over the horizon (see the module docstring)."""
+    def _predicted(self, time_s: float, rover_velocity_en: tuple[float, float]) -> np.ndarray:
+        """(east, north) rows: remembered echoes, those of moving tracks replaced by their
+        predicted paths over the horizon (see the module docstring)."""
         moving = self.tracker.moving(time_s, rover_velocity_en)
         if not moving:
-            return self._points[kept, 1:3]
+            return self._points[:, 1:3]
         p = self.params
-        keep = kept & ~np.isin(self._points[:, 3], [t.ident for t in moving])
+        keep = ~np.isin(self._points[:, 3], [t.ident for t in moving])
         tau = np.arange(0.0, p.horizon_s + 1e-9, p.prediction_step_s)
         paths = [np.column_stack((e + t.v_east_mps * tau, n + t.v_north_mps * tau))
                  for t in moving for e, n in [t.position_at(time_s)]]  # fmt: skip
