@@ -73,6 +73,9 @@ SIDE_BODY_RAD = {2: -math.pi / 2.0, 6: math.pi / 2.0}
 FRONT = 0
 WALL_MIN_ECHOES = 5
 """A side beam's echoes in a row that make a wall worth looking along (a quarter of a second)."""
+WALL_MIN_SPAN_M = 0.6
+"""A side beam's echoes off one surface over at least this much of the rover's travel (m) make a
+wall worth looking along (a small drum is passed in less)."""
 WALL_MAX_RMS_M = 0.08
 """A wall's echoes farther than this (RMS, m) from its fitted line: not one flat wall."""
 ALIGN_TOL_M = 0.12
@@ -293,9 +296,10 @@ class Passage:
         if self.state == "" and len(sweep) >= WALL_MIN_ECHOES + 1 and sweep[-2].range_m <= p.wall_range_m \
                 and beam.range_m > sweep[-2].range_m + p.depth_m:  # fmt: skip
             wall = self._wall_before(list(sweep)[:-1])
-            if len(wall) >= WALL_MIN_ECHOES:
-                base, along, normal, _ = wall_line(wall, p.beam_half_deg)
-                self._candidate = (time_s, Gap(wall[-1].point(), normal, 0.0, 0.0), along)
+            if len(wall) >= WALL_MIN_ECHOES and math.dist(wall[0].origin_en, wall[-1].origin_en) >= WALL_MIN_SPAN_M:
+                base, along, normal, rms = wall_line(wall, p.beam_half_deg)
+                if rms <= WALL_MAX_RMS_M:
+                    self._candidate = (time_s, Gap(wall[-1].point(), normal, 0.0, 0.0), along)
         if math.isfinite(beam.range_m) and len(sweep) >= 3 and sweep[-2].range_m > beam.range_m + p.depth_m:
             self._look_back(time_s, sweep)
 
