@@ -1,111 +1,126 @@
-"""Narrow passages: finding a gap in the remembered echoes, looking through it, passing it."""
+"""Narrow passages (rover_ctl.navigation.gaps): the wall's line, the opening a side beam's sweep
+proves free, and the whole manoeuvre on a kinematic rover beside a wall (tests/proximity/gap_world.py)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import replace
 
-import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from proximity.gap_world import WIDTH, drive_past_gap
 
 from rover_ctl.config import PassageParams
-from rover_ctl.navigation.gaps import Gap, Passage, find_gap, seen_open_m, spread_m
+from rover_ctl.navigation.gaps import Beam, Odometry, gap_from_sweep, wall_line
 
 PARAMS = replace(PassageParams(), enabled=True)
-WIDTH = 0.40
+WALL_Y = 3.0
 
 
-def wall_echoes(gap_centre_e: float, gap_m: float, wall_n: float = 3.0, spacing_m: float = 0.05, range_m: float = 1.0):
-    """Echoes on a wall across y = wall_n from x = -3 to 3, with an opening, seen head-on at ``range_m``."""
-    xs = np.arange(-3.0, 3.0, spacing_m)
-    xs = xs[np.abs(xs - gap_centre_e) >= gap_m / 2.0]
-    points = np.column_stack((xs, np.full(len(xs), wall_n)))
-    return points, np.full(len(xs), range_m), np.full(len(xs), math.pi / 2.0)
+def sweep(gap_x: float, gap_m: float, distance_m: float = 1.2, step_m: float = 0.02, yaw_deg: float = 0.0):
+    """Left-beam readings of a rover driving east along y = WALL_Y - distance_m past an opening
+    (cones of 5 rays, nearest hit; the wall's near face at WALL_Y, 0.3 m deep)."""
+    beams = []
+    for k, x in enumerate([-1.5 + step_m * i for i in range(int(4.0 / step_m))]):
+        axis = math.pi / 2 + math.radians(yaw_deg)
+        hits = []
+        for ray in (-7.5, -3.75, 0.0, 3.75, 7.5):
+            a = axis + math.radians(ray)
+            r = distance_m / math.sin(a)
+            at = x + r * math.cos(a)
+            deep = x + (distance_m + 0.3) / math.sin(a) * math.cos(a)
+            if abs(at - gap_x) < gap_m / 2 and abs(deep - gap_x) < gap_m / 2:
+                continue  # through the opening
+            if abs(at - gap_x) < gap_m / 2:  # enters the opening, hits its side
+                r = (distance_m + 0.1) / math.sin(a)
+            hits.append(r)
+        beams.append(Beam(k * 0.04, (x, WALL_Y - distance_m), axis, min(hits) if hits else math.inf))
+    return beams
 
 
-def test_an_opening_of_one_and_a_half_widths_in_a_wall_is_found_where_it_is():
-    gap = find_gap(*wall_echoes(0.8, 0.6), (0.0, 0.0), (0.0, 10.0), WIDTH, PARAMS)
+def split(beams):
+    """(wall echoes, free run, its bounding echoes) of the first opening in a sweep."""
+    first = next(i for i, b in enumerate(beams) if not math.isfinite(b.range_m) or b.range_m > 2.0)
+    last = next(i for i in range(first, len(beams)) if math.isfinite(beams[i].range_m) and beams[i].range_m < 2.0)
+    return [b for b in beams if math.isfinite(b.range_m)], beams[first:last], beams[first - 1], beams[last]
+
+
+def test_the_wall_line_is_its_near_face_whatever_the_beams_incidence():
+    beams = [b for b in sweep(99.0, 0.0, yaw_deg=10.0) if math.isfinite(b.range_m)]
+    base, along, normal, rms = wall_line(beams, 7.5)
+    assert base[1] == pytest.approx(WALL_Y, abs=0.02)
+    assert normal == pytest.approx((0.0, 1.0), abs=0.01)
+    assert along == pytest.approx((1.0, 0.0), abs=0.01)
+    assert rms < 0.01
+
+
+@given(gap_x=st.floats(-0.5, 0.5), gap_m=st.floats(0.45, 1.0), distance_m=st.floats(0.6, 1.5))
+@settings(max_examples=60, deadline=None)
+def test_what_a_sweep_proves_free_lies_inside_the_opening(gap_x, gap_m, distance_m):
+    beams = sweep(gap_x, gap_m, distance_m)
+    if all(math.isfinite(b.range_m) and b.range_m < 2.0 for b in beams):
+        return  # the cone never fitted through: nothing proved
+    wall, free, before, after = split(beams)
+    gap = gap_from_sweep(wall, free, before, after, 7.5, 0.5, 0.08)
     assert gap is not None
-    assert gap.centre_en == pytest.approx((0.8, 3.0), abs=0.05)
-    assert gap.axis_en == pytest.approx((0.0, 1.0), abs=1e-6)
-    # Upper bound: the hole between the echoes plus each edge's beam spread (1 m * tan 7.5 deg).
-    assert gap.width_m == pytest.approx(0.6 + 2 * math.tan(math.radians(7.5)), abs=0.06)
+    assert gap.width_low_m <= gap_m + 1e-6  # a lower bound, never more than there is
+    assert abs(gap.centre_en[0] - gap_x) + gap.width_low_m / 2 <= gap_m / 2 + 0.02
+    assert gap.width_high_m >= gap_m - 0.05
+    assert gap.axis_en == pytest.approx((0.0, 1.0), abs=0.02)
 
 
-def test_a_wall_without_opening_or_with_one_too_narrow_has_no_gap():
-    assert find_gap(*wall_echoes(0.8, 0.0), (0.0, 0.0), (0.0, 10.0), WIDTH, PARAMS) is None
-    assert find_gap(*wall_echoes(0.8, 0.2, range_m=0.3), (0.0, 0.0), (0.0, 10.0), WIDTH, PARAMS) is None
+def test_a_one_and_a_half_width_opening_is_proved_wide_enough_a_narrower_one_is_not():
+    needed = WIDTH + 2 * PARAMS.side_clearance_m
+    wide = gap_from_sweep(*split(sweep(0.3, 1.5 * WIDTH)), 7.5, 0.5, 0.08)
+    assert needed <= wide.width_low_m <= 1.5 * WIDTH
+    narrow = gap_from_sweep(*split(sweep(0.3, 1.1 * WIDTH, distance_m=0.8)), 7.5, 0.5, 0.08)
+    assert narrow.width_low_m < needed
 
 
-def test_an_opening_wide_enough_for_the_rule_base_is_left_to_it():
-    assert find_gap(*wall_echoes(0.0, 1.6), (0.0, 0.0), (0.0, 10.0), WIDTH, PARAMS) is None
+def test_odometry_integrates_wheels_and_gyro():
+    odo = Odometry()
+    odo.on_wheels(0.0, 0.0)
+    odo.on_gyro(0.0, 0.0)
+    odo.on_gyro(0.5, -math.pi)  # NED clockwise -> a quarter turn to the left
+    odo.on_wheels(1.0, 1.0)
+    assert odo.heading_rad == pytest.approx(math.pi / 2)
+    assert odo.position_en == pytest.approx((0.0, 1.0), abs=1e-9)
 
 
-def test_obstacles_one_behind_the_other_are_no_opening():
-    points = np.array([[-0.3, 2.0], [0.3, 3.5]])
-    assert find_gap(points, np.ones(2), np.full(2, math.pi / 2), (0.0, 0.0), (0.0, 10.0), WIDTH, PARAMS) is None
+@pytest.mark.parametrize("gap_x", [0.5, 1.0, 2.0])
+def test_a_one_and_a_half_width_gap_beside_the_rover_is_driven_through_without_contact(gap_x):
+    run, _ = drive_past_gap(PARAMS, gap_x=gap_x)
+    assert run.crossing_x(WALL_Y) == pytest.approx(gap_x, abs=0.05)
+    assert run.min_clearance_m > 0.05
+    assert run.events[-1] == "Narrow passage: through"
+    assert [s for s, *_ in run.trace if s != "inspect"][0] == "line_up" and "pass" in {s for s, *_ in run.trace}
 
 
-def test_spread_is_the_beam_width_across_the_way():
-    assert spread_m(np.array([2.0]), np.array([math.pi / 2]), math.pi / 2, 7.5)[0] == pytest.approx(2 * math.tan(math.radians(7.5)))
-    assert spread_m(np.array([2.0]), np.array([0.0]), math.pi / 2, 7.5)[0] == pytest.approx(0.0, abs=1e-12)
+def test_the_passage_does_not_use_the_fused_pose_for_geometry():
+    calm, _ = drive_past_gap(PARAMS)
+    drifting, _ = drive_past_gap(PARAMS, pose_drift_mps=0.2)
+    assert drifting.crossing_x(WALL_Y) == pytest.approx(calm.crossing_x(WALL_Y), abs=1e-9)
 
 
-GAP = Gap((0.0, 3.0), (0.0, 1.0), 0.7, ((-0.3, 3.0), (0.3, 3.0)))
+@pytest.mark.parametrize("gap_m", [0.45, 2.5])
+def test_too_narrow_or_wide_enough_for_the_rule_base_is_left_alone(gap_m):
+    run, _ = drive_past_gap(PARAMS, gap_m=gap_m)
+    assert run.trace == [] or {s for s, *_ in run.trace} == {"inspect"}
+    assert run.crossing_x(WALL_Y) is None
 
 
-def test_a_beam_through_the_gap_shows_its_cone_free():
-    # From 2.3 m before the line, head-on: the cone is 2 * 2.3 * tan(7.5 deg) = 0.61 m wide there.
-    beams = np.array([[0.0, 0.7, math.pi / 2, 4.0]])
-    assert seen_open_m(GAP, beams, 7.5, 0.6) == pytest.approx(0.6, abs=1e-9)  # clipped to the segment
-    near = np.array([[0.0, 2.0, math.pi / 2, 4.0]])
-    assert seen_open_m(GAP, near, 7.5, 0.6) == pytest.approx(2 * math.tan(math.radians(7.5)), abs=1e-9)
+def test_something_in_the_way_through_stops_the_rover_short_of_it():
+    run, _ = drive_past_gap(PARAMS, behind_m=0.9)  # a post 0.9 m beyond the opening, on its centre line
+    assert run.events[-1] == "Narrow passage: given up (something in the gap)"
+    assert run.min_clearance_m > 0.05
 
 
-def test_a_beam_that_stops_at_the_line_or_misses_it_shows_nothing():
-    assert seen_open_m(GAP, np.array([[0.0, 0.7, math.pi / 2, 2.3]]), 7.5, 0.6) == 0.0  # echo on the line: a post
-    assert seen_open_m(GAP, np.array([[2.0, 0.7, math.pi / 2, 4.0]]), 7.5, 0.6) == 0.0  # passes beside
-    assert seen_open_m(GAP, np.empty((0, 4)), 7.5, 0.6) == 0.0
-
-
-def test_overlapping_beams_are_counted_once():
-    beams = np.array([[0.0, 2.0, math.pi / 2, 4.0], [0.0, 2.0, math.pi / 2, 4.0], [0.1, 2.0, math.pi / 2, 4.0]])
-    assert seen_open_m(GAP, beams, 7.5, 0.6) == pytest.approx(2 * math.tan(math.radians(7.5)) + 0.1, abs=1e-9)
-
-
-def passage() -> Passage:
-    return Passage(PARAMS, lambda: 1.5, lambda: 0.45, lambda: WIDTH)
-
-
-def test_a_candidate_is_lined_up_for_then_passed_with_its_edges_set_aside():
-    p = passage()
-    echoes = wall_echoes(0.8, 0.6)
-    step = p.update(0.0, (0.0, 0.0), math.pi / 2, (0.0, 10.0), echoes)
-    assert step is not None and not step.confirmed and step.ignore is None
-    assert step.target_en[1] <= 3.0 - PARAMS.verify_m + 1e-9  # the look-through point, on the centre line
-    assert step.speed_limit_mps == PARAMS.speed_mps
-    # Lined up 2.3 m before the line, the front beam passes: confirmed.
-    p.beam(0.1, (0.8, 0.7), math.pi / 2, math.inf, 4.0)
-    step = p.update(0.1, (0.8, 0.5), math.pi / 2, (0.0, 10.0), echoes)
-    assert step.confirmed and step.ignore is not None
-    # The posts' echoes beside the strip are set aside; one in the strip is not.
-    posts = np.array([[0.8 - 0.32, 3.0], [0.8 + 0.32, 3.0], [0.8, 3.0]])
-    mask = step.ignore(posts, np.full(3, 0.5), np.full(3, math.pi / 2))
-    assert mask.tolist() == [True, True, False]
-    # Through: the passage ends.
-    assert p.update(5.0, (0.8, 3.6), math.pi / 2, (0.0, 10.0), echoes) is None
-    assert p.events[-1] == "Narrow passage: through"
-
-
-def test_a_passage_never_seen_through_is_given_up_and_not_tried_again():
-    p = passage()
-    echoes = wall_echoes(0.8, 0.6)
-    assert p.update(0.0, (0.0, 0.0), math.pi / 2, (0.0, 10.0), echoes) is not None
-    assert p.update(PARAMS.timeout_s + 1.0, (0.0, 0.0), math.pi / 2, (0.0, 10.0), echoes) is None
-    assert p.events[-1] == "Narrow passage: given up"
-    assert p.update(PARAMS.timeout_s + 2.0, (0.0, 0.0), math.pi / 2, (0.0, 10.0), echoes) is None
-
-
-def test_off_by_default():
-    p = Passage(PassageParams(), lambda: 1.5, lambda: 0.45, lambda: WIDTH)
-    assert p.update(0.0, (0.0, 0.0), math.pi / 2, (0.0, 10.0), wall_echoes(0.8, 0.6)) is None
+def test_a_gap_given_up_or_passed_is_not_taken_again_until_reject_s():
+    run, passage = drive_past_gap(PARAMS)
+    passage.odometry = Odometry()  # the scene starts over where the odometry's frame began
+    again, _ = drive_past_gap(PARAMS, passage=passage, t0_s=50.0)
+    assert "Narrow passage: lining up" not in again.events
+    passage.odometry = Odometry()
+    later, _ = drive_past_gap(PARAMS, passage=passage, t0_s=50.0 + PARAMS.reject_s + 50.0)
+    assert "Narrow passage: through" in later.events
