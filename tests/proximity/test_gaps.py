@@ -66,7 +66,7 @@ def test_what_a_sweep_proves_free_lies_inside_the_opening(gap_x, gap_m, distance
     assert gap is not None
     assert gap.width_low_m <= gap_m + 1e-6  # a lower bound, never more than there is
     assert abs(gap.centre_en[0] - gap_x) + gap.width_low_m / 2 <= gap_m / 2 + 0.02
-    assert gap.width_high_m >= gap_m - 0.05
+    assert gap.width_high_m == pytest.approx(gap_m, abs=0.1)  # the estimate that tells narrow from wide
     assert gap.axis_en == pytest.approx((0.0, 1.0), abs=0.02)
 
 
