@@ -19,6 +19,7 @@ straight legs for moving obstacles), mission time, smoothness as total heading c
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import statistics
@@ -38,8 +39,12 @@ from rover_ctl.tuning.scenarios import mission as scenario_mission
 from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimError, SimOptions, simulate
 
-VARIANTS = {"paper": ("paper", []), "default": ("default", []), "default-yield": ("default", ["yielding.enabled=0"]),
-            "default+gap": ("default", ["passage.enabled=1"])}
+VARIANTS = {
+    "paper": ("paper", []),
+    "default": ("default", []),
+    "default-yield": ("default", ["yielding.enabled=0"]),
+    "default+gap": ("default", ["passage.enabled=1"]),
+}
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
 """A collision with the rover slower than this (truth) was one it was struck in while stopped."""
@@ -136,7 +141,7 @@ def through_gap(scenario, run: Path) -> bool:
     low, high = max(p[0] for p in west), min(p[0] for p in east)
     wall_n = sum(p[1] for p in west) / len(west)
     states = [r for r in read_jsonl(run / "truth.jsonl") if r["type"] == "state"]
-    for a, b in zip(states, states[1:]):
+    for a, b in itertools.pairwise(states):
         if a["north_m"] < wall_n <= b["north_m"]:
             return low < a["east_m"] + (b["east_m"] - a["east_m"]) * (wall_n - a["north_m"]) / (b["north_m"] - a["north_m"]) < high
     return False
@@ -222,7 +227,10 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
     errors = sorted({r["error"] for r in runs if "error" in r})
     through = [f"{r['rulebase']} {r['through_gap']} of {r['runs']}" for r in rows if "through_gap" in r]
     if through:
-        lines += ["", "narrow_gap runs whose true path crossed the wall's line inside the opening (the rest went round): " + ", ".join(through) + "."]
+        lines += [
+            "",
+            f"narrow_gap runs whose true path crossed the wall's line inside the opening (the rest went round): {', '.join(through)}.",
+        ]
     markdown = "\n".join(lines)
     markdown += (
         "\n\nEach run: `rover-sitl --lockstep` and `rover-ctl run` as processes, the mission uploaded and "

@@ -16,17 +16,18 @@ the rule base instead turns and follows the wall, and then the side beam (perpen
 motion, 0.26 m wide at 1 m) sweeps the wall: echo, echo, ..., free, free, ..., echo. That is the
 classic sonar door detector. For one side sensor, readings ``j`` (echo at ``A``, range ``r_a``),
 ``j+1 .. k-1`` (free: no echo, or one more than ``depth_m`` beyond the wall) and ``k`` (echo at
-``B``), with ``r_a, r_b <= wall_range_m`` and ``|r_a - r_b| <= depth_m``, bound an opening on the
-line ``AB`` (echoes are placed on the beam's axis). Each free beam with origin ``o`` and unit
+``B``), with ``r_a, r_b <= wall_range_m`` and ``|r_a - r_b| <= depth_m``, bound an opening in the
+wall whose line is fitted to all that beam's echoes off it (``wall_line``: each cone's incidence
+counted, within ``WALL_MAX_RMS_M``). Each free beam with origin ``o`` and unit
 axis ``d`` crosses the line at distance ``x``; its cone covers ``x tan(b) / |d . n|`` either side
 of the crossing (``n`` the line's normal). The longest contiguous union of these intervals is
 **free for sure**: its length ``w_lo`` is a lower bound of the opening and its middle the
-estimate of the gap's centre. An upper bound is ``|AB| + s_a + s_b`` with ``s = r tan(b) / |d . n|``
-(each edge may lie its spread outside its echo). The gap is passable when
+estimate of the gap's centre. Its whole width is estimated as ``|AB| + s_a + s_b`` with
+``s = r tan(b) / |d . n|`` (each edge may lie its spread outside its echo). The gap is passable when
 ``w_lo >= W + 2 c`` (``W`` the footprint's width, ``c`` = ``side_clearance_m``) and it is narrow
 (``<= max_width_m``: wider ones the rule base passes unaided). With the emulator's cone the
-lower bound of a 0.6 m opening in a 0.3 m thick wall is about 0.52 m: the cone is free only while
-it is free through the wall's whole depth.
+lower bound of a 0.6 m opening in a 0.3 m thick wall is at most 0.52 m (0.47 m measured): the
+cone is free only while it is free through the wall's whole depth.
 
 **The frame: dead reckoning, not the pose filter.** The margin in a 1.5x gap is 0.1 m a side.
 The GPS-fused pose moves against the ground by 0.1-0.2 m (median, p95 0.4 m) over 5 s as fixes
@@ -36,14 +37,20 @@ distances and the gyro (``Odometry``: 1 cm per metre of slip in the emulator), w
 that found the gap and the rover that drives through it agree to a few centimetres over the few
 metres involved. The fused pose is used only to know where the mission's goal is.
 
-**Going through** (``Passage``), once a passable gap leads towards the goal (the goal lies
-beyond the wall line): ``P0`` is the point on the gap's centre line ``standoff_m`` before it.
+**Going through** (``Passage``). ``P0`` is the point on the gap's centre line ``standoff_m``
+before it.
 
+0. *inspect*: when a side beam stops echoing off a wall (``WALL_MIN_ECHOES`` over at least
+   ``WALL_MIN_SPAN_M`` of travel) and the goal lies beyond that wall, the rover drives on straight
+   along it at ``speed_mps`` so that the beam sweeps the opening cleanly. If the sweep proves too
+   little but the opening may be wide enough, it sweeps it once more backwards (both passes' free
+   cones count); nothing within ``max_width_m`` (plus ``wall_range_m`` backwards): hand back;
 1. *line up*: turn in place to face ``P0`` (or away from it and reverse, whichever turns less),
    drive to it, turn in place to face the gap's axis;
 2. *look*: the front beam must now see through: every front reading for ``look_s`` free up to
-   the wall line plus ``depth_m`` (from ``P0`` the front cone is 0.2 m wide at the wall);
-   otherwise the gap is given up;
+   the wall line plus ``depth_m`` (from ``P0`` the front cone is 0.2 m wide at the wall), and
+   the front-left and front-right beams must read alike within ``ALIGN_TOL_M`` (square to a flat
+   wall: the axis estimate is good to about 4 degrees); otherwise the gap is given up;
 3. *pass*: pure pursuit on the centre line (target ``lookahead_m`` ahead of the rover's
    projection) at ``speed_mps``, stopping and giving up if the front beam echoes inside
    ``stop_m`` (something in the gap); done when the rover's back is ``exit_m`` beyond the line.
@@ -132,7 +139,10 @@ class Beam:
     range_m: float
 
     def point(self) -> EN:
-        return (self.origin_en[0] + self.range_m * math.cos(self.axis_rad), self.origin_en[1] + self.range_m * math.sin(self.axis_rad))
+        return (
+            self.origin_en[0] + self.range_m * math.cos(self.axis_rad),
+            self.origin_en[1] + self.range_m * math.sin(self.axis_rad),
+        )
 
 
 @dataclass(frozen=True)
@@ -182,7 +192,12 @@ def wall_line(wall: list[Beam], beam_half_deg: float) -> tuple[EN, EN, EN, float
         te, tn = -te, -tn
     last = origins[-1]
     offset = rho - (last[0] * ne + last[1] * nn)  # the foot of the normal from the last sensor
-    return (float(last[0] + offset * ne), float(last[1] + offset * nn)), (te, tn), (ne, nn), math.sqrt(cost)
+    return (
+        (float(last[0] + offset * ne), float(last[1] + offset * nn)),
+        (te, tn),
+        (ne, nn),
+        math.sqrt(cost),
+    )
 
 
 def gap_from_sweep(wall: list[Beam], free: list[Beam], before: Beam, after: Beam, beam_half_deg: float, depth_m: float,
@@ -297,9 +312,13 @@ class Passage:
                 and beam.range_m > sweep[-2].range_m + p.depth_m:  # fmt: skip
             wall = self._wall_before(list(sweep)[:-1])
             if len(wall) >= WALL_MIN_ECHOES and math.dist(wall[0].origin_en, wall[-1].origin_en) >= WALL_MIN_SPAN_M:
-                base, along, normal, rms = wall_line(wall, p.beam_half_deg)
+                _, along, normal, rms = wall_line(wall, p.beam_half_deg)
                 if rms <= WALL_MAX_RMS_M:
-                    self._candidate = (time_s, Gap(wall[-1].point(), normal, 0.0, 0.0), along)
+                    self._candidate = (
+                        time_s,
+                        Gap(wall[-1].point(), normal, 0.0, 0.0),
+                        along,
+                    )
         if math.isfinite(beam.range_m) and len(sweep) >= 3 and sweep[-2].range_m > beam.range_m + p.depth_m:
             self._look_back(time_s, sweep)
 
@@ -326,7 +345,10 @@ class Passage:
             return
         if gap.width_low_m < self._needed_m():
             if self.state == "inspect" and not self._reversing and gap.width_high_m >= self._needed_m():
-                self._seen_free, self._reversing = free, True  # it may be wide enough: sweep it again, backwards
+                self._seen_free, self._reversing = (
+                    free,
+                    True,
+                )  # it may be wide enough: sweep it again, backwards
                 self._inspect_from = self.odometry.position_en
             return
         if any(math.dist(gap.centre_en, c) <= p.match_m for until, c in self._rejected if until > time_s):
@@ -363,14 +385,24 @@ class Passage:
             if any(math.dist(candidate[1].centre_en, c) <= p.match_m for _, c in self._rejected):
                 return None
             self.state, self._since_s, self.found = "inspect", time_s, None
-            self._inspect_from, self._inspect_along = self.odometry.position_en, candidate[2]
+            self._inspect_from, self._inspect_along = (
+                self.odometry.position_en,
+                candidate[2],
+            )
             self._reversing, self._seen_free = False, []
             self.gap = candidate[1]
         if self.state == "inspect":
             return self._inspect(time_s, front, pose_en, pose_heading_rad, goal_en)
         return self._manoeuvre(time_s, front)
 
-    def _inspect(self, time_s: float, front: list[float], pose_en: EN, pose_heading_rad: float, goal_en: EN) -> Drive | None:
+    def _inspect(
+        self,
+        time_s: float,
+        front: list[float],
+        pose_en: EN,
+        pose_heading_rad: float,
+        goal_en: EN,
+    ) -> Drive | None:
         """A side beam stopped echoing off a wall the goal lies beyond: drive on straight along the
         wall, slowly, so that the beam sweeps the opening cleanly, until the wall echoes again."""
         p, odo = self.params, self.odometry
@@ -381,14 +413,22 @@ class Passage:
                 self.events.append("Narrow passage: lining up")
                 return self._manoeuvre(time_s, front)
         travelled = math.dist(odo.position_en, self._inspect_from)
-        if travelled > p.max_width_m + (p.wall_range_m if self._reversing else 0.0) or any(r <= 2.0 * p.stop_m for r in front) or time_s - self._since_s > p.timeout_s:
+        if (
+            travelled > p.max_width_m + (p.wall_range_m if self._reversing else 0.0)
+            or any(r <= 2.0 * p.stop_m for r in front)
+            or time_s - self._since_s > p.timeout_s
+        ):
             self._end(time_s)  # no narrow opening here (the wall's end, a wide gap, or in the way)
             return None
         error = _wrap(math.atan2(self._inspect_along[1], self._inspect_along[0]) - odo.heading_rad)
         if abs(error) > math.pi / 2.0:
             self._end(time_s)  # the wall runs the other way: not going along it
             return None
-        return Drive((-1.0 if self._reversing else 1.0) * p.speed_mps * max(math.cos(error), 0.0), self._rate(error), self.state)
+        return Drive(
+            (-1.0 if self._reversing else 1.0) * p.speed_mps * max(math.cos(error), 0.0),
+            self._rate(error),
+            self.state,
+        )
 
     def gap_leads_to(self, gap: Gap, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
         """The goal lies beyond the gap's line (the goal taken into the odometry frame)."""
@@ -417,10 +457,13 @@ class Passage:
             self._give_up(time_s, "timeout")
             return None
         axis = math.atan2(gap.axis_en[1], gap.axis_en[0])
-        along, lateral = gap.coordinates(odo.position_en)
+        along, _ = gap.coordinates(odo.position_en)
         nose_to_line = -along - self._length_m() / 2.0
         if self.state == "line_up":
-            start = (gap.centre_en[0] - p.standoff_m * gap.axis_en[0], gap.centre_en[1] - p.standoff_m * gap.axis_en[1])
+            start = (
+                gap.centre_en[0] - p.standoff_m * gap.axis_en[0],
+                gap.centre_en[1] - p.standoff_m * gap.axis_en[1],
+            )
             drive = self._go_to(start, axis)
             if drive is not None:
                 return drive
@@ -449,7 +492,10 @@ class Passage:
             self._end(time_s)
             return None
         ahead = along + p.lookahead_m
-        target = (gap.centre_en[0] + ahead * gap.axis_en[0], gap.centre_en[1] + ahead * gap.axis_en[1])
+        target = (
+            gap.centre_en[0] + ahead * gap.axis_en[0],
+            gap.centre_en[1] + ahead * gap.axis_en[1],
+        )
         error = _wrap(math.atan2(target[1] - odo.north_m, target[0] - odo.east_m) - odo.heading_rad)
         return Drive(p.speed_mps * max(math.cos(error), 0.0), self._rate(error), self.state)
 
@@ -473,7 +519,11 @@ class Passage:
         if distance <= NEAR_M:  # close: hold the heading, close the distance along it
             if abs(ahead) <= p.position_tol_m:
                 return None
-            return Drive(math.copysign(min(p.speed_mps, 2.0 * abs(ahead) + 0.05), ahead), 0.0, self.state)
+            return Drive(
+                math.copysign(min(p.speed_mps, 2.0 * abs(ahead) + 0.05), ahead),
+                0.0,
+                self.state,
+            )
         bearing = math.atan2(dn, de)
         forwards = abs(_wrap(bearing - odo.heading_rad)) + abs(_wrap(final_rad - bearing))
         backwards = abs(_wrap(bearing + math.pi - odo.heading_rad)) + abs(_wrap(final_rad - bearing - math.pi))

@@ -4,6 +4,7 @@ lockstep, the bench's ``narrow_gap`` world, narrow passages on (``passage.enable
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 from pathlib import Path
 
@@ -28,7 +29,7 @@ def opening(seed: int) -> tuple[float, float]:
 
 def crossing_east_m(states: list[dict]) -> float:
     """Where the rover's true centre crossed the wall's line northwards."""
-    for a, b in zip(states, states[1:]):
+    for a, b in itertools.pairwise(states):
         if a["north_m"] < WALL_N <= b["north_m"]:
             return a["east_m"] + (b["east_m"] - a["east_m"]) * (WALL_N - a["north_m"]) / (b["north_m"] - a["north_m"])
     raise AssertionError("the rover never crossed the wall's line")

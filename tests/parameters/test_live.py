@@ -21,7 +21,6 @@ import math
 from functools import cache
 from types import SimpleNamespace
 
-import numpy as np
 import pytest
 from estimator.synthetic import CMAC, Sensors, simulate
 
@@ -239,35 +238,25 @@ def mission_for_planner(d: Daemon) -> None:
 
 
 def ex_passage(d: Daemon) -> list:
-    """The approach as configured, then again with passages on (their other parameters matter only then)."""
-    trace = passage_run(d, True)
+    """A 1.5x-width gap beside the rover (tests/proximity/gap_world.py) driven past with the
+    autopilot's passage, if on; then with it on: passed, the same gap again (rejected), a gap
+    0.3 m along (another one unless ``match_m`` says otherwise), and something in the way."""
+    from proximity.gap_world import drive_past_gap
+
+    from rover_ctl.navigation.gaps import Odometry
+
+    passage = d.autopilot.passage
+
+    def run(**options) -> list:
+        passage.odometry = Odometry()  # the scene starts over where the odometry's frame began
+        result, _ = drive_past_gap(d.config.passage, passage=passage, **options)
+        return [result.trace, result.events, [tuple(round(v, 3) for v in p) for p in result.path[::10]]]
+
+    trace = run() if d.config.passage.enabled else []
     enabled, d.config.passage.enabled = d.config.passage.enabled, True
-    trace += passage_run(d, False) + passage_run(d, True)  # given up (the rejection expires by t = 300 s), then passed
-    d.config.passage.enabled = enabled
-    return trace
-
-
-def passage_run(d: Daemon, seen_through: bool) -> list:
-    """``seen_through``: the front beam looks through the opening before the rover gets there."""
-    passage, trace = d.autopilot.passage, []
     passage.reset()
-    xs = np.arange(-3.0, 3.0, 0.05)
-    probe = np.array([[0.45, 3.0], [1.12, 3.1], [0.8, 2.9], [0.5, 3.4], [1.3, 2.5]])
-    for k in range(130):  # a wall across y = 3 with a 0.6 m opening at x = 0.8, approached and passed
-        t = k * 0.1 + (300.0 if seen_through else 100.0)  # after the give-up below has expired
-        y = -1.0 + 0.05 * k
-        opening = xs[np.abs(xs - 0.8) >= 0.3] + 0.03 * math.sin(k)  # echoes jitter: the estimate moves
-        rng = max(3.0 - y, 0.2)
-        echoes = (np.column_stack((opening, np.full(len(opening), 3.0))), np.full(len(opening), rng), np.full(len(opening), math.pi / 2))
-        passage.beam(t, (0.8, y), math.pi / 2, math.inf if seen_through and (k < 30 or k > 44) else rng, 4.0)
-        heading = math.pi / 2 + 0.09 * (k % 9 - 4)
-        step = passage.update(t, (0.8 - 0.002 * k, y), heading, (0.0, 10.0), echoes)
-        if step is None:
-            trace.append(None)
-            continue
-        mask = step.ignore(probe, np.full(len(probe), 0.4 + 0.01 * k), np.full(len(probe), heading)).tolist() if step.ignore else None
-        trace.append((step.confirmed, step.target_en, step.target_distance_m, step.speed_limit_mps, step.gap, mask))
-    trace.append(list(passage.events))
+    trace += run(t0_s=1000.0) + run(t0_s=1030.0) + run(t0_s=1060.0, gap_x=1.3) + run(t0_s=2000.0, behind_m=0.9)
+    d.config.passage.enabled = enabled
     return trace
 
 
@@ -413,7 +402,7 @@ EXERCISES = {
     "proximity": (no_mission, ex_proximity, ("proximity.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "tracks": (predicting, ex_tracks, ("proximity.",)),
     "planner": (mission_for_planner, ex_planner, ("planner.", "robot.footprint_width_m")),
-    "passage": (no_mission, ex_passage, ("passage.", "robot.footprint_length_m", "robot.footprint_width_m", "proximity.memory_s")),
+    "passage": (no_mission, ex_passage, ("passage.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),

@@ -9,6 +9,7 @@ the goal. The passage gets what the autopilot gives it: wheel distances, the gyr
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -18,7 +19,11 @@ from shapely.geometry import Polygon, box
 from rover_ctl.config import PassageParams, RobotParams
 from rover_ctl.navigation.gaps import Passage
 
-LENGTH, WIDTH, TRACK = RobotParams.footprint_length_m, RobotParams.footprint_width_m, RobotParams.track_m
+LENGTH, WIDTH, TRACK = (
+    RobotParams.footprint_length_m,
+    RobotParams.footprint_width_m,
+    RobotParams.track_m,
+)
 SENSORS = {0: (LENGTH / 2, 0.0, 0.0), 1: (LENGTH / 2, -WIDTH / 2, -math.pi / 4), 2: (0.0, -WIDTH / 2, -math.pi / 2),
            6: (0.0, WIDTH / 2, math.pi / 2), 7: (LENGTH / 2, WIDTH / 2, math.pi / 4)}  # fmt: skip
 """orientation: (forward, left, body angle) as on the default rover."""
@@ -36,14 +41,17 @@ class Run:
 
     def crossing_x(self, wall_y: float) -> float | None:
         """Where the rover's centre crossed the wall's near face."""
-        for (x0, y0, _), (x1, y1, _) in zip(self.path, self.path[1:]):
+        for (x0, y0, _), (x1, y1, _) in itertools.pairwise(self.path):
             if y0 < wall_y <= y1:
                 return x0 + (x1 - x0) * (wall_y - y0) / (y1 - y0)
         return None
 
 
 def _walls(gap_x: float, gap_m: float, wall_y: float, behind_m: float | None) -> list[tuple[float, float, float, float]]:
-    boxes = [(-6.0, wall_y, gap_x - gap_m / 2, wall_y + 0.3), (gap_x + gap_m / 2, wall_y, 6.0, wall_y + 0.3)]
+    boxes = [
+        (-6.0, wall_y, gap_x - gap_m / 2, wall_y + 0.3),
+        (gap_x + gap_m / 2, wall_y, 6.0, wall_y + 0.3),
+    ]
     if behind_m is not None:  # something beyond the opening, on its centre line
         boxes.append((gap_x - 0.3, wall_y + behind_m, gap_x + 0.3, wall_y + behind_m + 0.3))
     return boxes
@@ -84,7 +92,10 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
         t = t0_s + k * dt
         passage.odometry.on_wheels(left, right)
         for o, (fwd, lat, body) in SENSORS.items():
-            sx, sy = x + fwd * math.cos(h) - lat * math.sin(h), y + fwd * math.sin(h) + lat * math.cos(h)
+            sx, sy = (
+                x + fwd * math.cos(h) - lat * math.sin(h),
+                y + fwd * math.sin(h) + lat * math.cos(h),
+            )
             r = min(_ray(sx, sy, h + body + a, boxes) for a in RAYS) + rng.normal(0.0, 0.01)
             passage.on_range(t, o, round(r, 2) if r <= MAX_M else math.inf)
         drift += drift_rng.normal(0.0, 1.0, 2) * pose_drift_mps * dt * 5
@@ -92,7 +103,10 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
         if drive is None:
             through = through or any("through" in e for e in passage.events)
             target = math.atan2(goal[1] - y, goal[0] - x) if through else 0.0
-            v, w = cruise_mps, max(-1.0, min(1.0, 2.0 * math.remainder(target - h, math.tau)))
+            v, w = (
+                cruise_mps,
+                max(-1.0, min(1.0, 2.0 * math.remainder(target - h, math.tau))),
+            )
         else:
             v, w = drive.speed_mps, drive.yaw_rate_radps
             run.trace.append((drive.state, round(v, 3), round(w, 3)))

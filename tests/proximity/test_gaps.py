@@ -18,7 +18,13 @@ PARAMS = replace(PassageParams(), enabled=True)
 WALL_Y = 3.0
 
 
-def sweep(gap_x: float, gap_m: float, distance_m: float = 1.2, step_m: float = 0.02, yaw_deg: float = 0.0):
+def sweep(
+    gap_x: float,
+    gap_m: float,
+    distance_m: float = 1.2,
+    step_m: float = 0.02,
+    yaw_deg: float = 0.0,
+):
     """Left-beam readings of a rover driving east along y = WALL_Y - distance_m past an opening
     (cones of 5 rays, nearest hit; the wall's near face at WALL_Y, 0.3 m deep)."""
     beams = []
@@ -35,7 +41,14 @@ def sweep(gap_x: float, gap_m: float, distance_m: float = 1.2, step_m: float = 0
             if abs(at - gap_x) < gap_m / 2:  # enters the opening, hits its side
                 r = (distance_m + 0.1) / math.sin(a)
             hits.append(r)
-        beams.append(Beam(k * 0.04, (x, WALL_Y - distance_m), axis, min(hits) if hits else math.inf))
+        beams.append(
+            Beam(
+                k * 0.04,
+                (x, WALL_Y - distance_m),
+                axis,
+                min(hits) if hits else math.inf,
+            )
+        )
     return beams
 
 
@@ -43,7 +56,12 @@ def split(beams):
     """(wall echoes, free run, its bounding echoes) of the first opening in a sweep."""
     first = next(i for i, b in enumerate(beams) if not math.isfinite(b.range_m) or b.range_m > 2.0)
     last = next(i for i in range(first, len(beams)) if math.isfinite(beams[i].range_m) and beams[i].range_m < 2.0)
-    return [b for b in beams if math.isfinite(b.range_m)], beams[first:last], beams[first - 1], beams[last]
+    return (
+        [b for b in beams if math.isfinite(b.range_m)],
+        beams[first:last],
+        beams[first - 1],
+        beams[last],
+    )
 
 
 def test_the_wall_line_is_its_near_face_whatever_the_beams_incidence():
@@ -55,7 +73,11 @@ def test_the_wall_line_is_its_near_face_whatever_the_beams_incidence():
     assert rms < 0.01
 
 
-@given(gap_x=st.floats(-0.5, 0.5), gap_m=st.floats(0.45, 1.0), distance_m=st.floats(0.6, 1.5))
+@given(
+    gap_x=st.floats(-0.5, 0.5),
+    gap_m=st.floats(0.45, 1.0),
+    distance_m=st.floats(0.6, 1.5),
+)
 @settings(max_examples=60, deadline=None)
 def test_what_a_sweep_proves_free_lies_inside_the_opening(gap_x, gap_m, distance_m):
     beams = sweep(gap_x, gap_m, distance_m)
@@ -89,12 +111,14 @@ def test_odometry_integrates_wheels_and_gyro():
 
 
 @pytest.mark.parametrize("gap_x", [0.5, 1.0, 2.0])
-def test_a_one_and_a_half_width_gap_beside_the_rover_is_driven_through_without_contact(gap_x):
+def test_a_one_and_a_half_width_gap_beside_the_rover_is_driven_through_without_contact(
+    gap_x,
+):
     run, _ = drive_past_gap(PARAMS, gap_x=gap_x)
     assert run.crossing_x(WALL_Y) == pytest.approx(gap_x, abs=0.05)
     assert run.min_clearance_m > 0.05
     assert run.events[-1] == "Narrow passage: through"
-    assert [s for s, *_ in run.trace if s != "inspect"][0] == "line_up" and "pass" in {s for s, *_ in run.trace}
+    assert next(s for s, *_ in run.trace if s != "inspect") == "line_up" and "pass" in {s for s, *_ in run.trace}
 
 
 def test_the_passage_does_not_use_the_fused_pose_for_geometry():
@@ -117,7 +141,7 @@ def test_something_in_the_way_through_stops_the_rover_short_of_it():
 
 
 def test_a_gap_given_up_or_passed_is_not_taken_again_until_reject_s():
-    run, passage = drive_past_gap(PARAMS)
+    _, passage = drive_past_gap(PARAMS)
     passage.odometry = Odometry()  # the scene starts over where the odometry's frame began
     again, _ = drive_past_gap(PARAMS, passage=passage, t0_s=50.0)
     assert "Narrow passage: lining up" not in again.events
