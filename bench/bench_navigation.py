@@ -19,6 +19,7 @@ straight legs for moving obstacles), mission time, smoothness as total heading c
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import statistics
@@ -38,7 +39,12 @@ from rover_ctl.tuning.scenarios import mission as scenario_mission
 from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimError, SimOptions, simulate
 
-VARIANTS = {"paper": ("paper", []), "default": ("default", []), "default-yield": ("default", ["yielding.enabled=0"])}
+VARIANTS = {
+    "paper": ("paper", []),
+    "default": ("default", []),
+    "default-yield": ("default", ["yielding.enabled=0"]),
+    "default+gap": ("default", ["passage.enabled=1"]),
+}
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
 """A collision with the rover slower than this (truth) was one it was struck in while stopped."""
@@ -125,7 +131,20 @@ def one_run(name: str, variant: str, seed: int, root: Path, variants: dict = VAR
         "timed_out": metrics["timed_out"], "collisions": metrics["collisions"], "collisions_moving": moving, "collisions_stopped": stopped, "path_ratio": metrics["path_length_m"] / shortest if shortest else math.nan,
         "duration_s": metrics["duration_s"], "turning_deg_per_m": turning_deg_per_m(folder / "run"),
         "latency_p99_ms": metrics["loop_latency_p99_ms"],
+        **({"through_gap": through_gap(scenario, folder / "run")} if name == "narrow_gap" else {}),
     }  # fmt: skip
+
+
+def through_gap(scenario, run: Path) -> bool:
+    """narrow_gap: the rover's true centre crossed the wall's line inside the opening."""
+    west, east = scenario.polygons
+    low, high = max(p[0] for p in west), min(p[0] for p in east)
+    wall_n = sum(p[1] for p in west) / len(west)
+    states = [r for r in read_jsonl(run / "truth.jsonl") if r["type"] == "state"]
+    for a, b in itertools.pairwise(states):
+        if a["north_m"] < wall_n <= b["north_m"]:
+            return low < a["east_m"] + (b["east_m"] - a["east_m"]) * (wall_n - a["north_m"]) / (b["north_m"] - a["north_m"]) < high
+    return False
 
 
 def _mean(values: list[float]) -> float:
@@ -215,6 +234,7 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
                 "duration_s": _mean([r.get("duration_s") for r in group if r["success"]]),
                 "turning_deg_per_m": _mean([r.get("turning_deg_per_m") for r in group if r["success"]]),
                 "latency_p99_ms": max((r.get("latency_p99_ms") or 0.0 for r in group), default=math.nan),
+                **({"through_gap": sum(bool(r.get("through_gap")) for r in group)} if name == "narrow_gap" else {}),
             })  # fmt: skip
     rows = fresh
     if (only or chosen) and PREVIOUS.exists() and not rulebase:
@@ -239,6 +259,12 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
             f"{r['path_ratio']:.2f} | {r['duration_s']:.1f} | {r['turning_deg_per_m']:.1f} | {r['latency_p99_ms']:.2f} | {r['date']} |"
         )
     errors = sorted({r["error"] for r in runs if "error" in r})
+    through = [f"{r['rulebase']} {r['through_gap']} of {r['runs']}" for r in rows if "through_gap" in r]
+    if through:
+        lines += [
+            "",
+            f"narrow_gap runs whose true path crossed the wall's line inside the opening (the rest went round): {', '.join(through)}.",
+        ]
     markdown = "\n".join(lines)
     markdown += (
         "\n\nEach run: `rover-sitl --lockstep` and `rover-ctl run` as processes, the mission uploaded and "

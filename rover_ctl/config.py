@@ -515,6 +515,60 @@ class YieldParams:
 
 
 @dataclass
+class PassageParams:
+    """Narrow passages (``rover_ctl.navigation.gaps``): an opening barely wider than the rover,
+    seen through by a side rangefinder as the rover follows a wall, lined up on and driven through."""
+
+    enabled: bool = False
+    """Look for narrow passages and drive through them (docs/perception.md, "Narrow passages")."""
+    side_clearance_m: float = 0.02
+    """An opening is passable when it was seen free over at least the footprint's width plus this
+    much on each side (m). What a 15 degree cone sees free of a 0.6 m opening in a 0.3 m wall is
+    about 0.47 m (docs/perception.md), so a 1.5x gap passes with up to 0.03."""
+    max_width_m: float = 1.2
+    """Openings that may be wider than this (m) are left to the rule base: its sides read near
+    only inside 0.7 m, so it drives through them unaided."""
+    wall_range_m: float = 1.6
+    """Side echoes farther than this (m) do not bound a gap: a side cone wider than the opening
+    (2 r tan(beam_half): 0.42 m at 1.6 m) never sees through it."""
+    depth_m: float = 0.5
+    """A side reading is free when it has no echo or one at least this far (m) beyond the wall;
+    from the line-up point the front beam must see this far beyond the wall's line."""
+    beam_half_deg: float = 7.5
+    """Half the rangefinders' beam width (deg): an echo at range r may come from anywhere within
+    r tan(beam_half) of the beam's axis, and a free reading shows that whole cone free."""
+    history_s: float = 8.0
+    """Side readings kept to find a gap in (s), and how long a gap found stays usable."""
+    min_free: int = 2
+    """Free side readings needed between the wall's two echoes (one could be a dropped echo)."""
+    match_m: float = 0.4
+    """A gap found within this (m) of one given up or passed is that gap again."""
+    standoff_m: float = 1.0
+    """The rover lines up on the gap's centre line this far (m, its centre) before the wall's line."""
+    heading_tol_deg: float = 3.0
+    """Lining up: turned in place until its heading is within this (deg) of the gap's axis."""
+    position_tol_m: float = 0.03
+    """Lining up: the line-up point is reached within this (m)."""
+    look_s: float = 0.3
+    """Lined up, the front beam must see through the gap for this long (s) before the rover goes."""
+    speed_mps: float = 0.3
+    """Speed while lining up and passing (m/s)."""
+    turn_rate_dps: float = 45.0
+    """Largest yaw rate while lining up and passing (deg/s)."""
+    lookahead_m: float = 0.6
+    """Passing: pure pursuit on the gap's centre line, aiming this far (m) beyond the rover's
+    projection on it."""
+    stop_m: float = 0.25
+    """Passing: a front echo nearer than this (m) stops the rover and gives the gap up."""
+    exit_m: float = 0.3
+    """The passage is over when the rover's back is this far (m) beyond the wall's line."""
+    timeout_s: float = 40.0
+    """A passage not through after this long (s) is given up ..."""
+    reject_s: float = 60.0
+    """... and a gap given up or passed is not taken again for this long (s)."""
+
+
+@dataclass
 class AutopilotParams:
     """Modes and arming (``rover_ctl.autopilot``), ArduPilot Rover's LOIT_* / ARMING_* counterparts."""
 
@@ -586,6 +640,7 @@ class Config:
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
     proximity: ProximityParams = field(default_factory=ProximityParams)
     yielding: YieldParams = field(default_factory=YieldParams)
+    passage: PassageParams = field(default_factory=PassageParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
     obstacle_map: ObstacleMapParams = field(default_factory=ObstacleMapParams)
     command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)

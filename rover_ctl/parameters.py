@@ -6,9 +6,10 @@ has one: WP_RADIUS, WP_SPEED, RTL_SPEED, FS_GCS_TIMEOUT, FS_ACTION, FENCE_ACTION
 WENC_RADIUS, SCHED_LOOP_RATE; otherwise one prefix per section: ``RBT_`` robot, ``LINK_`` vehicle
 link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
 ``WHL_`` wheel control, ``DMN_`` control loop, ``GCS_`` ground-station link, ``NAV_`` navigator,
-``PRX_`` obstacle memory, ``YLD_`` yielding, ``OMAP_`` persistent obstacles, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The
-default is the dataclass default and the description is the field's docstring in config.py, so
-neither is written twice.
+``PRX_`` obstacle memory, ``YLD_`` yielding, ``OMAP_`` persistent obstacles, ``GAP_`` narrow
+passages, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The default is the
+dataclass default and the description is the field's docstring in config.py, so neither is
+written twice.
 
 Values on the wire are numbers. A string choice (``failsafe.gcs_action``) is a number as in
 ArduPilot (FS_ACTION 0 continue, 1 RTL, 2 hold); a list of rangefinder orientations
@@ -401,6 +402,26 @@ _DECLARED: tuple[tuple, ...] = (
     ("obstacle_map.max_obstacles", "OMAP_MAX_OBST", 1, 1000, RW, {}),
     ("obstacle_map.simplify_m", "OMAP_SIMPLIFY", 0.0, 5.0, RW, {}),
     ("obstacle_map.margin_m", "OMAP_MARGIN", 0.0, 10.0, RW, {}),
+    ("passage.enabled", "GAP_ENABLE", 0, 1, RW, {}),
+    ("passage.side_clearance_m", "GAP_SIDE_CLEAR", 0.0, 1.0, RW, {}),
+    ("passage.max_width_m", "GAP_MAX_WIDTH", 0.0, 10.0, RW, {}),
+    ("passage.wall_range_m", "GAP_WALL_RANGE", 0.2, 10.0, RW, {}),
+    ("passage.depth_m", "GAP_DEPTH", 0.05, 5.0, RW, {}),
+    ("passage.beam_half_deg", "GAP_BEAM_HALF", 0.0, 45.0, RW, {}),
+    ("passage.history_s", "GAP_HISTORY", 0.5, 60.0, RW, {}),
+    ("passage.min_free", "GAP_MIN_FREE", 1, 100, RW, {}),
+    ("passage.match_m", "GAP_MATCH", 0.01, 5.0, RW, {}),
+    ("passage.standoff_m", "GAP_STANDOFF", 0.3, 5.0, RW, {}),
+    ("passage.heading_tol_deg", "GAP_HDG_TOL", 0.5, 30.0, RW, {}),
+    ("passage.position_tol_m", "GAP_POS_TOL", 0.005, 0.5, RW, {}),
+    ("passage.look_s", "GAP_LOOK", 0.0, 10.0, RW, {}),
+    ("passage.speed_mps", "GAP_SPEED", 0.05, 2.0, RW, {}),
+    ("passage.turn_rate_dps", "GAP_TURN_RATE", 5.0, 180.0, RW, {"units": "deg/s"}),
+    ("passage.lookahead_m", "GAP_LOOKAHEAD", 0.1, 5.0, RW, {}),
+    ("passage.stop_m", "GAP_STOP", 0.0, 2.0, RW, {}),
+    ("passage.exit_m", "GAP_EXIT", 0.0, 5.0, RW, {}),
+    ("passage.timeout_s", "GAP_TIMEOUT", 1.0, 600.0, RW, {}),
+    ("passage.reject_s", "GAP_REJECT", 0.0, 3600.0, RW, {}),
 )
 CONFIG_ONLY = frozenset({"link.vehicle_url", "link.gcs_url", "gcs.mission_store_path", "daemon.log_dir", "gcs.signing_key_path"})
 """Text fields: config file and command line only, never parameters."""

@@ -52,6 +52,7 @@ from rover_ctl.estimation.readings import Attitude, RangeReading, WheelDistance
 from rover_ctl.estimation.wheel_map import WheelMapCheck
 from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import Home, Mission
+from rover_ctl.navigation.gaps import Passage
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
@@ -68,7 +69,7 @@ LOG_COLUMNS = (
     "est_healthy", "gps_ok", "goal_seq", "goal_east_m", "goal_north_m", "target_east_m", "target_north_m",
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
-    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "latency_ms",
+    "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
     "map_obstacles",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
@@ -159,6 +160,7 @@ class Autopilot:
         self._map_updated_s = self._map_handed_s = -math.inf
         self._map_obstacles: tuple = ()  # the persistent obstacles handed to the planner
         self._map_moving: set[int] = set()  # tracks yielded to since the last map update
+        self.passage = Passage(config.passage, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
         self.mode = RoverMode.HOLD
         self.armed = False
         self.home: Home | None = None
@@ -207,6 +209,7 @@ class Autopilot:
     def on_wheels(self, reading: WheelDistance) -> None:
         self._sensor_seen(reading.time_s)
         self.wheels.on_wheels(reading)
+        self.passage.odometry.on_wheels(reading.left_m, reading.right_m)
         if self.wheel_map.verdict is None:
             self.wheel_map.on_wheels(reading)
             if self.wheel_map.verdict == "reversed":
@@ -218,6 +221,7 @@ class Autopilot:
     def on_attitude(self, reading: Attitude) -> None:
         self._sensor_seen(reading.time_s)
         self.wheel_map.on_attitude(reading)
+        self.passage.odometry.on_gyro(reading.time_s, reading.yaw_rate_radps)
 
     def _sensor_seen(self, t_s: float) -> None:
         if self._sensors_since_s is None:
@@ -519,6 +523,21 @@ class Autopilot:
                 if self.config.obstacle_map.enabled:
                     sensor = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
                     self.obstacle_map.add(reading.time_s, *sensor, reading.range_m, reading.max_range_m, ident)
+                if self.config.passage.enabled:
+                    self.passage.on_range(reading.time_s, orientation, reading.range_m)
+        if self.config.passage.enabled:  # a narrow passage: the manoeuvre drives, the rule base waits
+            drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal)
+            for text in self.passage.events:
+                self._say(text)
+            self.passage.events.clear()
+            if drive is not None:
+                self._commanded_speed_mps = abs(drive.speed_mps)
+                turn_mps = drive.yaw_rate_radps * self.config.robot.track_m / 2.0
+                left, right = self._speed_to_rpm(drive.speed_mps - turn_mps), self._speed_to_rpm(drive.speed_mps + turn_mps)
+                row.update(passage=drive.state, left_set_rpm=left, right_set_rpm=right)
+                return self.wheels.step(t_s, dt_s, left, right)
+        else:
+            self.passage.reset()
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()},
                                        pose.speed_mps)  # fmt: skip
         for orientation in decision.blocked_orientations:
@@ -605,6 +624,7 @@ class Autopilot:
             self._returning = False
         if self.follower is not None:
             self.follower.reset()
+        self.passage.reset()
         self.wheels.reset()
         if previous != mode:
             self._outbox.append(ModeChanged(mode, previous, reason))

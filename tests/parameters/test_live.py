@@ -283,6 +283,29 @@ def mission_for_planner(d: Daemon) -> None:
     with_mission(d, [wp(30, 0)], [circle])
 
 
+def ex_passage(d: Daemon) -> list:
+    """A 1.5x-width gap beside the rover (tests/proximity/gap_world.py) driven past with the
+    autopilot's passage, if on; then with it on: passed, the same gap again (rejected), a gap
+    0.3 m along (another one unless ``match_m`` says otherwise), and something in the way."""
+    from proximity.gap_world import drive_past_gap
+
+    from rover_ctl.navigation.gaps import Odometry
+
+    passage = d.autopilot.passage
+
+    def run(**options) -> list:
+        passage.odometry = Odometry()  # the scene starts over where the odometry's frame began
+        result, _ = drive_past_gap(d.config.passage, passage=passage, **options)
+        return [result.trace, result.events, [tuple(round(v, 3) for v in p) for p in result.path[::10]]]
+
+    trace = run() if d.config.passage.enabled else []
+    enabled, d.config.passage.enabled = d.config.passage.enabled, True
+    passage.reset()
+    trace += run(t0_s=1000.0) + run(t0_s=1030.0) + run(t0_s=1060.0, gap_x=1.3) + run(t0_s=2000.0, behind_m=0.9)
+    d.config.passage.enabled = enabled
+    return trace
+
+
 def ex_planner(d: Daemon) -> list:
     follower, trace = d.autopilot.follower, []
     for k in range(120):
@@ -425,6 +448,7 @@ EXERCISES = {
     "proximity": (no_mission, ex_proximity, ("proximity.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "tracks": (predicting, ex_tracks, ("proximity.",)),
     "planner": (mission_for_planner, ex_planner, ("planner.", "robot.footprint_width_m")),
+    "passage": (no_mission, ex_passage, ("passage.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
     "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),

@@ -1,0 +1,535 @@
+"""Narrow passages: an opening in a wall barely wider than the rover, seen through by a side
+rangefinder as the rover drives along the wall, then lined up on and driven through.
+
+Why. The rule bases read ranges by sector. In a gap 1.5 times the rover's width (0.6 m for a
+0.4 m rover) its posts stand 0.1 m from each side: every side and diagonal reads "near" and the
+rover sees a wall (the paper's "inability to identify passable narrow paths"). The rule base is
+left unchanged; this module finds such a gap and, once it is sure, drives the rover through it
+itself (turn in place, straight lines, pure pursuit on the centre line), then hands back.
+
+**Seeing a gap: only a beam that passed it counts.** A rangefinder reports the nearest echo
+anywhere in its cone (half-angle ``b`` = ``beam_half_deg``), so echoes say little about where an
+opening's edges are (a 0.6 m gap seen from 2 m by a 15 degree beam shows no hole at all) but a
+reading with no echo up to range R shows the whole cone free up to R. Approaching a wall head-on,
+the front cone fits through a 0.6 m opening only within a few centimetres of its centre line;
+the rule base instead turns and follows the wall, and then the side beam (perpendicular to the
+motion, 0.26 m wide at 1 m) sweeps the wall: echo, echo, ..., free, free, ..., echo. That is the
+classic sonar door detector. For one side sensor, readings ``j`` (echo at ``A``, range ``r_a``),
+``j+1 .. k-1`` (free: no echo, or one more than ``depth_m`` beyond the wall) and ``k`` (echo at
+``B``), with ``r_a, r_b <= wall_range_m`` and ``|r_a - r_b| <= depth_m``, bound an opening in the
+wall whose line is fitted to all that beam's echoes off it (``wall_line``: each cone's incidence
+counted, within ``WALL_MAX_RMS_M``). Each free beam with origin ``o`` and unit
+axis ``d`` crosses the line at distance ``x``; its cone covers ``x tan(b) / |d . n|`` either side
+of the crossing (``n`` the line's normal). The longest contiguous union of these intervals is
+**free for sure**: its length ``w_lo`` is a lower bound of the opening and its middle the
+estimate of the gap's centre. Its whole width is estimated as ``|AB| + s_a + s_b`` with
+``s = r tan(b) / |d . n|`` (each edge may lie its spread outside its echo). The gap is passable when
+``w_lo >= W + 2 c`` (``W`` the footprint's width, ``c`` = ``side_clearance_m``) and it is narrow
+(``<= max_width_m``: wider ones the rule base passes unaided). With the emulator's cone the
+lower bound of a 0.6 m opening in a 0.3 m thick wall is at most 0.52 m (0.47 m measured): the
+cone is free only while it is free through the wall's whole depth.
+
+**The frame: dead reckoning, not the pose filter.** The margin in a 1.5x gap is 0.1 m a side.
+The GPS-fused pose moves against the ground by 0.1-0.2 m (median, p95 0.4 m) over 5 s as fixes
+come in (measured in the emulator), so a gap placed in that frame would not be where the rover
+aims a few seconds later. Everything here lives in a frame of its own integrated from the wheel
+distances and the gyro (``Odometry``: 1 cm per metre of slip in the emulator), where the beams
+that found the gap and the rover that drives through it agree to a few centimetres over the few
+metres involved. The fused pose is used only to know where the mission's goal is.
+
+**Going through** (``Passage``). ``P0`` is the point on the gap's centre line ``standoff_m``
+before it.
+
+0. *inspect*: when a side beam stops echoing off a wall (``WALL_MIN_ECHOES`` over at least
+   ``WALL_MIN_SPAN_M`` of travel) and the goal lies beyond that wall, the rover drives on straight
+   along it at ``speed_mps`` so that the beam sweeps the opening cleanly. If the sweep proves too
+   little but the opening may be wide enough, it sweeps it once more backwards (both passes' free
+   cones count); nothing within ``max_width_m`` (plus ``wall_range_m`` backwards): hand back;
+1. *line up*: turn in place to face ``P0`` (or away from it and reverse, whichever turns less),
+   drive to it, turn in place to face the gap's axis;
+2. *look*: the front beam must now see through: every front reading for ``look_s`` free up to
+   the wall line plus ``depth_m`` (from ``P0`` the front cone is 0.2 m wide at the wall), and
+   the front-left and front-right beams must read alike within ``ALIGN_TOL_M`` (square to a flat
+   wall: the axis estimate is good to about 4 degrees); otherwise the gap is given up;
+3. *pass*: pure pursuit on the centre line (target ``lookahead_m`` ahead of the rover's
+   projection) at ``speed_mps``, stopping and giving up if the front beam echoes inside
+   ``stop_m`` (something in the gap); done when the rover's back is ``exit_m`` beyond the line.
+
+A passage not done within ``timeout_s`` is given up; a gap given up or passed is not taken again
+for ``reject_s`` (found again within ``match_m`` of it). Giving up hands the rover back to the
+rule base, which goes round as it would have. While lining up and passing, the rule base does
+not drive: the wall is in every sector, and the manoeuvre's moves are short, slow and checked.
+
+Pure: no clock, no I/O; times are passed in.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from rover_ctl.config import PassageParams
+
+EN = tuple[float, float]
+
+SIDE_BODY_RAD = {2: -math.pi / 2.0, 6: math.pi / 2.0}
+"""The side rangefinders (MAV_SENSOR_ORIENTATION yaw 90 and 270): body angle, counter-clockwise."""
+FRONT = 0
+WALL_MIN_ECHOES = 5
+"""A side beam's echoes in a row that make a wall worth looking along (a quarter of a second)."""
+WALL_MIN_SPAN_M = 0.6
+"""A side beam's echoes off one surface over at least this much of the rover's travel (m) make a
+wall worth looking along (a small drum is passed in less)."""
+WALL_MAX_RMS_M = 0.08
+"""A wall's echoes farther than this (RMS, m) from its fitted line: not one flat wall."""
+ALIGN_TOL_M = 0.12
+"""Lined up square to a flat wall, the front-left and front-right beams read alike: a difference
+beyond this (m) is a heading off the gap's axis by more than about 4 degrees."""
+DIAGONALS = (7, 1)
+"""Front-left and front-right (MAV_SENSOR_ORIENTATION yaw 315 and 45)."""
+HEADING_GAIN_PER_S = 2.5
+"""Yaw rate commanded per radian of heading error (rad/s per rad)."""
+DRIVE_MAX_ERROR_RAD = math.radians(15.0)
+"""Driving to a point: a heading error beyond this turns in place first."""
+NEAR_M = 0.1
+"""Driving to a point: within this the heading is held and only the distance along it is closed."""
+
+
+def _wrap(angle: float) -> float:
+    return math.remainder(angle, math.tau)
+
+
+class Odometry:
+    """Dead reckoning in a frame of its own: distance from the mean of the two wheels, heading
+    from the gyro's yaw rate (ATTITUDE's yawspeed, NED clockwise)."""
+
+    def __init__(self) -> None:
+        self.east_m = self.north_m = self.heading_rad = 0.0
+        self._wheels: tuple[float, float] | None = None
+        self._gyro_s: float | None = None
+
+    def on_wheels(self, left_m: float, right_m: float) -> None:
+        if self._wheels is not None:
+            step = ((left_m - self._wheels[0]) + (right_m - self._wheels[1])) / 2.0
+            if math.isfinite(step):
+                self.east_m += step * math.cos(self.heading_rad)
+                self.north_m += step * math.sin(self.heading_rad)
+        self._wheels = (left_m, right_m)
+
+    def on_gyro(self, time_s: float, yaw_rate_ned_radps: float) -> None:
+        if self._gyro_s is not None and 0.0 < time_s - self._gyro_s <= 0.5 and math.isfinite(yaw_rate_ned_radps):
+            self.heading_rad = _wrap(self.heading_rad - yaw_rate_ned_radps * (time_s - self._gyro_s))
+        self._gyro_s = time_s
+
+    @property
+    def position_en(self) -> EN:
+        return (self.east_m, self.north_m)
+
+
+@dataclass(frozen=True)
+class Beam:
+    """One reading in the odometry frame: origin, axis, range (inf: no echo)."""
+
+    time_s: float
+    origin_en: EN
+    axis_rad: float
+    range_m: float
+
+    def point(self) -> EN:
+        return (
+            self.origin_en[0] + self.range_m * math.cos(self.axis_rad),
+            self.origin_en[1] + self.range_m * math.sin(self.axis_rad),
+        )
+
+
+@dataclass(frozen=True)
+class Gap:
+    """An opening: centre, unit axis (through it, away from the side it was seen from), the
+    width seen free (lower bound) and the most it may be (upper bound)."""
+
+    centre_en: EN
+    axis_en: EN
+    width_low_m: float
+    width_high_m: float
+
+    def coordinates(self, point_en: EN) -> tuple[float, float]:
+        """(along the axis from the gap's line, left of the centre line)."""
+        de, dn = point_en[0] - self.centre_en[0], point_en[1] - self.centre_en[1]
+        ue, un = self.axis_en
+        return de * ue + dn * un, -de * un + dn * ue
+
+
+def wall_line(wall: list[Beam], beam_half_deg: float) -> tuple[EN, EN, EN, float]:
+    """A flat wall's line from a side beam's echoes off it: a point on it, the unit vector along
+    it (the way the sweep went), its unit normal away from the sensors and the RMS of the echoes'
+    distances to it.
+
+    A cone at incidence ``a`` (its axis to the wall's normal) echoes from the ray nearest the
+    normal, so the wall lies ``r cos(max(|a| - b, 0))`` from the sensor along the normal. The
+    normal is the direction that makes these distances agree best (least variance of
+    ``r_i cos(...) + o_i . n`` over a grid of 0.25 degree steps within 20 degrees of the
+    beams' mean axis); placing the echoes on the beams' axes instead tilts the line by the rover's
+    yaw as it drove (5-7 degrees measured)."""
+    origins = np.array([beam.origin_en for beam in wall])
+    ranges = np.array([beam.range_m for beam in wall])
+    axes = np.array([beam.axis_rad for beam in wall])
+    mean_axis = math.atan2(float(np.sin(axes).mean()), float(np.cos(axes).mean()))
+    half = math.radians(beam_half_deg)
+    best = (math.inf, mean_axis, 0.0)
+    for phi in mean_axis + np.radians(np.arange(-20.0, 20.001, 0.25)):
+        off = np.abs(np.remainder(axes - phi + math.pi, math.tau) - math.pi)
+        rho = ranges * np.cos(np.maximum(off - half, 0.0)) + origins @ np.array([math.cos(phi), math.sin(phi)])
+        cost = float(rho.var())
+        if cost < best[0]:
+            best = (cost, float(phi), float(rho.mean()))
+    cost, phi, rho = best
+    ne, nn = math.cos(phi), math.sin(phi)
+    te, tn = -nn, ne
+    if (origins[-1][0] - origins[0][0]) * te + (origins[-1][1] - origins[0][1]) * tn < 0.0:
+        te, tn = -te, -tn
+    last = origins[-1]
+    offset = rho - (last[0] * ne + last[1] * nn)  # the foot of the normal from the last sensor
+    return (
+        (float(last[0] + offset * ne), float(last[1] + offset * nn)),
+        (te, tn),
+        (ne, nn),
+        math.sqrt(cost),
+    )
+
+
+def gap_from_sweep(wall: list[Beam], free: list[Beam], before: Beam, after: Beam, beam_half_deg: float, depth_m: float,
+                   max_rms_m: float) -> Gap | None:  # fmt: skip
+    """The opening swept by ``free`` beams between the echoes ``before`` and ``after``, in the
+    wall whose echoes are ``wall`` (both sides of it), or None (see the module docstring)."""
+    if not wall or not free:
+        return None
+    a, b = before, after
+    base, (te, tn), (ne, nn), rms = wall_line(wall, beam_half_deg)
+    if rms > max_rms_m:
+        return None  # not one flat wall: no line to place an opening on
+    tan_b = math.tan(math.radians(beam_half_deg))
+    intervals = []
+    for beam in free:
+        de, dn = math.cos(beam.axis_rad), math.sin(beam.axis_rad)
+        incidence = de * ne + dn * nn
+        if incidence < 0.2:
+            return None  # a beam not looking at the wall: not a sweep of it
+        x = ((base[0] - beam.origin_en[0]) * ne + (base[1] - beam.origin_en[1]) * nn) / incidence
+        if x <= 0.0 or beam.range_m <= x + depth_m:
+            return None  # an echo at the wall (or short of it) inside the run: not free
+        t = (beam.origin_en[0] + x * de - base[0]) * te + (beam.origin_en[1] + x * dn - base[1]) * tn
+        half = x * tan_b / incidence
+        intervals.append((t - half, t + half))
+    intervals.sort()
+    best, (lo, hi) = (0.0, 0.0, 0.0), intervals[0]
+    for start, stop in [*intervals[1:], (math.inf, math.inf)]:
+        if start > hi:
+            if hi - lo > best[0]:
+                best = (hi - lo, lo, hi)
+            lo, hi = start, stop
+        else:
+            hi = max(hi, stop)
+    width_low, lo, hi = best
+    edges = []
+    for beam in (a, b):  # each edge may lie its spread beyond its echo
+        t = (beam.point()[0] - base[0]) * te + (beam.point()[1] - base[1]) * tn
+        spread = beam.range_m * tan_b / max(math.cos(beam.axis_rad) * ne + math.sin(beam.axis_rad) * nn, 0.2)
+        edges.append(t - spread if beam is a else t + spread)
+    middle = (lo + hi) / 2.0
+    centre = (base[0] + middle * te, base[1] + middle * tn)
+    return Gap(centre, (ne, nn), width_low, max(edges[1] - edges[0], width_low))
+
+
+@dataclass(frozen=True)
+class Drive:
+    """What the passage commands this step: forward speed (m/s, negative: reverse) and yaw rate
+    (rad/s, counter-clockwise)."""
+
+    speed_mps: float
+    yaw_rate_radps: float
+    state: str
+
+
+class Passage:
+    """Finds a narrow gap with the side rangefinders and drives through it (module docstring)."""
+
+    def __init__(self, params: PassageParams, footprint_length_m, footprint_width_m) -> None:
+        """The footprint: functions giving the value in force."""
+        self.params = params
+        self._length_m, self._width_m = footprint_length_m, footprint_width_m
+        self.odometry = Odometry()
+        self._sweeps: dict[int, deque[Beam]] = {o: deque() for o in SIDE_BODY_RAD}
+        self._front: list[float] = []
+        self._diagonal_m: dict[int, float] = {}
+        self._rejected: list[tuple[float, EN]] = []  # (until when, centre)
+        self.found: Gap | None = None
+        """The latest passable gap seen (kept until used, superseded or older than ``history_s``)."""
+        self._found_s = -math.inf
+        self._candidate: tuple[float, Gap, EN] | None = None  # (when, where the wall stopped echoing, along it)
+        self._inspect_from: EN = (0.0, 0.0)
+        self._inspect_along: EN = (1.0, 0.0)
+        self._reversing = False  # inspecting: the second pass, backwards
+        self._seen_free: list[Beam] = []  # inspecting: the free beams of the first pass
+        self.gap: Gap | None = None
+        """The gap being passed."""
+        self.state = ""
+        self._since_s = 0.0
+        self._look_from_s = 0.0
+        self.events: list[str] = []
+        """What happened (found, passing, through, given up), for the shell to say; the caller clears it."""
+
+    def reset(self) -> None:
+        """Stop any passage (mode change, feature off); what was seen is forgotten."""
+        self.gap, self.found, self.state, self._candidate = None, None, "", None
+        for sweep in self._sweeps.values():
+            sweep.clear()
+
+    # ---- inputs --------------------------------------------------------------------------------
+
+    def on_range(self, time_s: float, orientation: int, range_m: float) -> None:
+        """A new rangefinder reading (inf: no echo), placed with the odometry's pose now."""
+        p, odo = self.params, self.odometry
+        if orientation == FRONT:
+            self._front.append(range_m)
+            return
+        if orientation in DIAGONALS:
+            self._diagonal_m[orientation] = range_m
+            return
+        if orientation not in SIDE_BODY_RAD:
+            return
+        left = math.copysign(self._width_m() / 2.0, SIDE_BODY_RAD[orientation])
+        c, s = math.cos(odo.heading_rad), math.sin(odo.heading_rad)
+        beam = Beam(time_s, (odo.east_m - left * s, odo.north_m + left * c), odo.heading_rad + SIDE_BODY_RAD[orientation],
+                    range_m if math.isfinite(range_m) and range_m >= 0.0 else math.inf)  # fmt: skip
+        sweep = self._sweeps[orientation]
+        while sweep and sweep[0].time_s < time_s - p.history_s:
+            sweep.popleft()
+        sweep.append(beam)
+        if self.state == "" and len(sweep) >= WALL_MIN_ECHOES + 1 and sweep[-2].range_m <= p.wall_range_m \
+                and beam.range_m > sweep[-2].range_m + p.depth_m:  # fmt: skip
+            wall = self._wall_before(list(sweep)[:-1])
+            if len(wall) >= WALL_MIN_ECHOES and math.dist(wall[0].origin_en, wall[-1].origin_en) >= WALL_MIN_SPAN_M:
+                _, along, normal, rms = wall_line(wall, p.beam_half_deg)
+                if rms <= WALL_MAX_RMS_M:
+                    self._candidate = (
+                        time_s,
+                        Gap(wall[-1].point(), normal, 0.0, 0.0),
+                        along,
+                    )
+        if math.isfinite(beam.range_m) and len(sweep) >= 3 and sweep[-2].range_m > beam.range_m + p.depth_m:
+            self._look_back(time_s, sweep)
+
+    def _look_back(self, time_s: float, sweep: deque[Beam]) -> None:
+        """The newest beam echoes after free ones: back over them to the wall's run before."""
+        p = self.params
+        beams = list(sweep)
+        last = beams[-1]
+        j = len(beams) - 2
+        while j >= 0 and beams[j].range_m > last.range_m + p.depth_m:
+            j -= 1
+        free = beams[j + 1 : -1]
+        if j < 0 or len(free) < p.min_free:
+            return
+        if len(self._wall_before(beams[: j + 1])) < WALL_MIN_ECHOES or last.range_m > p.wall_range_m:
+            return
+        # The wall's line from all its echoes in the history, both sides of the opening: the
+        # longer the baseline, the better its direction (the gap's axis).
+        wall = [b for b in beams if b.range_m <= p.wall_range_m and abs(b.range_m - last.range_m) <= p.depth_m]
+        if self.state == "inspect":
+            free = self._seen_free + free  # the first pass's free cones count on the way back
+        gap = gap_from_sweep(wall, free, beams[j], last, p.beam_half_deg, p.depth_m, WALL_MAX_RMS_M)
+        if gap is None or gap.width_high_m > p.max_width_m:
+            return
+        if gap.width_low_m < self._needed_m():
+            if self.state == "inspect" and not self._reversing and gap.width_high_m >= self._needed_m():
+                self._seen_free, self._reversing = (
+                    free,
+                    True,
+                )  # it may be wide enough: sweep it again, backwards
+                self._inspect_from = self.odometry.position_en
+            return
+        if any(math.dist(gap.centre_en, c) <= p.match_m for until, c in self._rejected if until > time_s):
+            return
+        self.found, self._found_s = gap, time_s
+        self.events.append(f"Narrow passage seen: {gap.width_low_m:.2f} m free (at most {gap.width_high_m:.2f} m)")
+
+    def _wall_before(self, beams: list[Beam]) -> list[Beam]:
+        """The run of echoes off one wall that ends ``beams`` (each within ``depth_m`` of the
+        last's range, all within ``wall_range_m``)."""
+        p = self.params
+        if not beams or beams[-1].range_m > p.wall_range_m:
+            return []
+        i = len(beams) - 1
+        while i > 0 and beams[i - 1].range_m <= p.wall_range_m and abs(beams[i - 1].range_m - beams[-1].range_m) <= p.depth_m:
+            i -= 1
+        return beams[i:]
+
+    def _needed_m(self) -> float:
+        return self._width_m() + 2.0 * self.params.side_clearance_m
+
+    # ---- the step ------------------------------------------------------------------------------
+
+    def step(self, time_s: float, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> Drive | None:
+        """The command of this step, or None (the rule base drives). ``pose_*`` is the fused pose
+        and ``goal_en`` the goal in its frame: they say only which side of the wall the goal is."""
+        p = self.params
+        front, self._front = self._front, []
+        self._rejected = [(until, c) for until, c in self._rejected if until > time_s]
+        if self.state == "":
+            candidate, self._candidate = self._candidate, None
+            if candidate is None or time_s - candidate[0] > 0.5 or not self.gap_leads_to(candidate[1], pose_en, pose_heading_rad, goal_en):
+                return None
+            if any(math.dist(candidate[1].centre_en, c) <= p.match_m for _, c in self._rejected):
+                return None
+            self.state, self._since_s, self.found = "inspect", time_s, None
+            self._inspect_from, self._inspect_along = (
+                self.odometry.position_en,
+                candidate[2],
+            )
+            self._reversing, self._seen_free = False, []
+            self.gap = candidate[1]
+        if self.state == "inspect":
+            return self._inspect(time_s, front, pose_en, pose_heading_rad, goal_en)
+        return self._manoeuvre(time_s, front)
+
+    def _inspect(
+        self,
+        time_s: float,
+        front: list[float],
+        pose_en: EN,
+        pose_heading_rad: float,
+        goal_en: EN,
+    ) -> Drive | None:
+        """A side beam stopped echoing off a wall the goal lies beyond: drive on straight along the
+        wall, slowly, so that the beam sweeps the opening cleanly, until the wall echoes again."""
+        p, odo = self.params, self.odometry
+        if self.found is not None:
+            gap, self.found = self.found, None
+            if self.gap_leads_to(gap, pose_en, pose_heading_rad, goal_en):
+                self.gap, self.state, self._since_s = gap, "line_up", time_s
+                self.events.append("Narrow passage: lining up")
+                return self._manoeuvre(time_s, front)
+        travelled = math.dist(odo.position_en, self._inspect_from)
+        if (
+            travelled > p.max_width_m + (p.wall_range_m if self._reversing else 0.0)
+            or any(r <= 2.0 * p.stop_m for r in front)
+            or time_s - self._since_s > p.timeout_s
+        ):
+            self._end(time_s)  # no narrow opening here (the wall's end, a wide gap, or in the way)
+            return None
+        error = _wrap(math.atan2(self._inspect_along[1], self._inspect_along[0]) - odo.heading_rad)
+        if abs(error) > math.pi / 2.0:
+            self._end(time_s)  # the wall runs the other way: not going along it
+            return None
+        return Drive(
+            (-1.0 if self._reversing else 1.0) * p.speed_mps * max(math.cos(error), 0.0),
+            self._rate(error),
+            self.state,
+        )
+
+    def gap_leads_to(self, gap: Gap, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
+        """The goal lies beyond the gap's line (the goal taken into the odometry frame)."""
+        odo = self.odometry
+        turn = odo.heading_rad - pose_heading_rad
+        de, dn = goal_en[0] - pose_en[0], goal_en[1] - pose_en[1]
+        c, s = math.cos(turn), math.sin(turn)
+        goal = (odo.east_m + c * de - s * dn, odo.north_m + s * de + c * dn)
+        return gap.coordinates(goal)[0] > self.params.standoff_m
+
+    def _give_up(self, time_s: float, why: str) -> None:
+        self.events.append(f"Narrow passage: given up ({why})")
+        self._end(time_s)
+
+    def _end(self, time_s: float) -> None:
+        if self.gap is not None:
+            self._rejected.append((time_s + self.params.reject_s, self.gap.centre_en))
+        self.gap, self.state = None, ""
+        for sweep in self._sweeps.values():
+            sweep.clear()
+
+    def _manoeuvre(self, time_s: float, front: list[float]) -> Drive | None:
+        p, gap, odo = self.params, self.gap, self.odometry
+        assert gap is not None
+        if time_s - self._since_s > p.timeout_s:
+            self._give_up(time_s, "timeout")
+            return None
+        axis = math.atan2(gap.axis_en[1], gap.axis_en[0])
+        along, _ = gap.coordinates(odo.position_en)
+        nose_to_line = -along - self._length_m() / 2.0
+        if self.state == "line_up":
+            start = (
+                gap.centre_en[0] - p.standoff_m * gap.axis_en[0],
+                gap.centre_en[1] - p.standoff_m * gap.axis_en[1],
+            )
+            drive = self._go_to(start, axis)
+            if drive is not None:
+                return drive
+            error = _wrap(axis - odo.heading_rad)
+            if abs(error) > math.radians(p.heading_tol_deg):
+                return self._turn(error)
+            self.state, self._look_from_s = "look", time_s
+            return Drive(0.0, 0.0, self.state)
+        if self.state == "look":
+            if any(r <= nose_to_line + p.depth_m for r in front):
+                self._give_up(time_s, "the front beam does not see through")
+                return None
+            if time_s - self._look_from_s < p.look_s:
+                return Drive(0.0, 0.0, self.state)
+            left, right = (self._diagonal_m.get(o, math.inf) for o in DIAGONALS)
+            if not (math.isfinite(left) and math.isfinite(right)) or abs(left - right) > ALIGN_TOL_M:
+                self._give_up(time_s, "not square to the wall")
+                return None
+            self.state = "pass"
+            self.events.append("Narrow passage: seen through, passing")
+        if any(r <= p.stop_m for r in front) or any(r <= nose_to_line + p.depth_m for r in front if nose_to_line > 0.0):
+            self._give_up(time_s, "something in the gap")
+            return None
+        if along - self._length_m() / 2.0 >= p.exit_m:
+            self.events.append("Narrow passage: through")
+            self._end(time_s)
+            return None
+        ahead = along + p.lookahead_m
+        target = (
+            gap.centre_en[0] + ahead * gap.axis_en[0],
+            gap.centre_en[1] + ahead * gap.axis_en[1],
+        )
+        error = _wrap(math.atan2(target[1] - odo.north_m, target[0] - odo.east_m) - odo.heading_rad)
+        return Drive(p.speed_mps * max(math.cos(error), 0.0), self._rate(error), self.state)
+
+    def _rate(self, error_rad: float) -> float:
+        limit = math.radians(self.params.turn_rate_dps)
+        return max(-limit, min(limit, HEADING_GAIN_PER_S * error_rad))
+
+    def _turn(self, error_rad: float) -> Drive:
+        return Drive(0.0, self._rate(error_rad), self.state)
+
+    def _go_to(self, point_en: EN, final_rad: float) -> Drive | None:
+        """Towards a point, forwards or in reverse, whichever turns less on the way there and to
+        ``final_rad`` from there; None once there."""
+        p, odo = self.params, self.odometry
+        de, dn = point_en[0] - odo.east_m, point_en[1] - odo.north_m
+        distance = math.hypot(de, dn)
+        if distance <= p.position_tol_m:
+            return None
+        c, s = math.cos(odo.heading_rad), math.sin(odo.heading_rad)
+        ahead = de * c + dn * s
+        if distance <= NEAR_M:  # close: hold the heading, close the distance along it
+            if abs(ahead) <= p.position_tol_m:
+                return None
+            return Drive(
+                math.copysign(min(p.speed_mps, 2.0 * abs(ahead) + 0.05), ahead),
+                0.0,
+                self.state,
+            )
+        bearing = math.atan2(dn, de)
+        forwards = abs(_wrap(bearing - odo.heading_rad)) + abs(_wrap(final_rad - bearing))
+        backwards = abs(_wrap(bearing + math.pi - odo.heading_rad)) + abs(_wrap(final_rad - bearing - math.pi))
+        reverse = backwards < forwards
+        error = _wrap(bearing + (math.pi if reverse else 0.0) - odo.heading_rad)
+        if abs(error) > DRIVE_MAX_ERROR_RAD:
+            return self._turn(error)
+        speed = min(p.speed_mps, 2.0 * distance + 0.05) * math.cos(error)
+        return Drive(-speed if reverse else speed, self._rate(error), self.state)

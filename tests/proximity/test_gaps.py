@@ -1,0 +1,150 @@
+"""Narrow passages (rover_ctl.navigation.gaps): the wall's line, the opening a side beam's sweep
+proves free, and the whole manoeuvre on a kinematic rover beside a wall (tests/proximity/gap_world.py)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from proximity.gap_world import WIDTH, drive_past_gap
+
+from rover_ctl.config import PassageParams
+from rover_ctl.navigation.gaps import Beam, Odometry, gap_from_sweep, wall_line
+
+PARAMS = replace(PassageParams(), enabled=True)
+WALL_Y = 3.0
+
+
+def sweep(
+    gap_x: float,
+    gap_m: float,
+    distance_m: float = 1.2,
+    step_m: float = 0.02,
+    yaw_deg: float = 0.0,
+):
+    """Left-beam readings of a rover driving east along y = WALL_Y - distance_m past an opening
+    (cones of 5 rays, nearest hit; the wall's near face at WALL_Y, 0.3 m deep)."""
+    beams = []
+    for k, x in enumerate([-1.5 + step_m * i for i in range(int(4.0 / step_m))]):
+        axis = math.pi / 2 + math.radians(yaw_deg)
+        hits = []
+        for ray in (-7.5, -3.75, 0.0, 3.75, 7.5):
+            a = axis + math.radians(ray)
+            r = distance_m / math.sin(a)
+            at = x + r * math.cos(a)
+            deep = x + (distance_m + 0.3) / math.sin(a) * math.cos(a)
+            if abs(at - gap_x) < gap_m / 2 and abs(deep - gap_x) < gap_m / 2:
+                continue  # through the opening
+            if abs(at - gap_x) < gap_m / 2:  # enters the opening, hits its side
+                r = (distance_m + 0.1) / math.sin(a)
+            hits.append(r)
+        beams.append(
+            Beam(
+                k * 0.04,
+                (x, WALL_Y - distance_m),
+                axis,
+                min(hits) if hits else math.inf,
+            )
+        )
+    return beams
+
+
+def split(beams):
+    """(wall echoes, free run, its bounding echoes) of the first opening in a sweep."""
+    first = next(i for i, b in enumerate(beams) if not math.isfinite(b.range_m) or b.range_m > 2.0)
+    last = next(i for i in range(first, len(beams)) if math.isfinite(beams[i].range_m) and beams[i].range_m < 2.0)
+    return (
+        [b for b in beams if math.isfinite(b.range_m)],
+        beams[first:last],
+        beams[first - 1],
+        beams[last],
+    )
+
+
+def test_the_wall_line_is_its_near_face_whatever_the_beams_incidence():
+    beams = [b for b in sweep(99.0, 0.0, yaw_deg=10.0) if math.isfinite(b.range_m)]
+    base, along, normal, rms = wall_line(beams, 7.5)
+    assert base[1] == pytest.approx(WALL_Y, abs=0.02)
+    assert normal == pytest.approx((0.0, 1.0), abs=0.01)
+    assert along == pytest.approx((1.0, 0.0), abs=0.01)
+    assert rms < 0.01
+
+
+@given(
+    gap_x=st.floats(-0.5, 0.5),
+    gap_m=st.floats(0.45, 1.0),
+    distance_m=st.floats(0.6, 1.5),
+)
+@settings(max_examples=60, deadline=None)
+def test_what_a_sweep_proves_free_lies_inside_the_opening(gap_x, gap_m, distance_m):
+    beams = sweep(gap_x, gap_m, distance_m)
+    if all(math.isfinite(b.range_m) and b.range_m < 2.0 for b in beams):
+        return  # the cone never fitted through: nothing proved
+    wall, free, before, after = split(beams)
+    gap = gap_from_sweep(wall, free, before, after, 7.5, 0.5, 0.08)
+    assert gap is not None
+    assert gap.width_low_m <= gap_m + 1e-6  # a lower bound, never more than there is
+    assert abs(gap.centre_en[0] - gap_x) + gap.width_low_m / 2 <= gap_m / 2 + 0.02
+    assert gap.width_high_m == pytest.approx(gap_m, abs=0.1)  # the estimate that tells narrow from wide
+    assert gap.axis_en == pytest.approx((0.0, 1.0), abs=0.02)
+
+
+def test_a_one_and_a_half_width_opening_is_proved_wide_enough_a_narrower_one_is_not():
+    needed = WIDTH + 2 * PARAMS.side_clearance_m
+    wide = gap_from_sweep(*split(sweep(0.3, 1.5 * WIDTH)), 7.5, 0.5, 0.08)
+    assert needed <= wide.width_low_m <= 1.5 * WIDTH
+    narrow = gap_from_sweep(*split(sweep(0.3, 1.1 * WIDTH, distance_m=0.8)), 7.5, 0.5, 0.08)
+    assert narrow.width_low_m < needed
+
+
+def test_odometry_integrates_wheels_and_gyro():
+    odo = Odometry()
+    odo.on_wheels(0.0, 0.0)
+    odo.on_gyro(0.0, 0.0)
+    odo.on_gyro(0.5, -math.pi)  # NED clockwise -> a quarter turn to the left
+    odo.on_wheels(1.0, 1.0)
+    assert odo.heading_rad == pytest.approx(math.pi / 2)
+    assert odo.position_en == pytest.approx((0.0, 1.0), abs=1e-9)
+
+
+@pytest.mark.parametrize("gap_x", [0.5, 1.0, 2.0])
+def test_a_one_and_a_half_width_gap_beside_the_rover_is_driven_through_without_contact(
+    gap_x,
+):
+    run, _ = drive_past_gap(PARAMS, gap_x=gap_x)
+    assert run.crossing_x(WALL_Y) == pytest.approx(gap_x, abs=0.05)
+    assert run.min_clearance_m > 0.05
+    assert run.events[-1] == "Narrow passage: through"
+    assert next(s for s, *_ in run.trace if s != "inspect") == "line_up" and "pass" in {s for s, *_ in run.trace}
+
+
+def test_the_passage_does_not_use_the_fused_pose_for_geometry():
+    calm, _ = drive_past_gap(PARAMS)
+    drifting, _ = drive_past_gap(PARAMS, pose_drift_mps=0.2)
+    assert drifting.crossing_x(WALL_Y) == pytest.approx(calm.crossing_x(WALL_Y), abs=1e-9)
+
+
+@pytest.mark.parametrize("gap_m", [0.45, 2.5])
+def test_too_narrow_or_wide_enough_for_the_rule_base_is_left_alone(gap_m):
+    run, _ = drive_past_gap(PARAMS, gap_m=gap_m)
+    assert run.trace == [] or {s for s, *_ in run.trace} == {"inspect"}
+    assert run.crossing_x(WALL_Y) is None
+
+
+def test_something_in_the_way_through_stops_the_rover_short_of_it():
+    run, _ = drive_past_gap(PARAMS, behind_m=0.9)  # a post 0.9 m beyond the opening, on its centre line
+    assert run.events[-1] == "Narrow passage: given up (something in the gap)"
+    assert run.min_clearance_m > 0.05
+
+
+def test_a_gap_given_up_or_passed_is_not_taken_again_until_reject_s():
+    _, passage = drive_past_gap(PARAMS)
+    passage.odometry = Odometry()  # the scene starts over where the odometry's frame began
+    again, _ = drive_past_gap(PARAMS, passage=passage, t0_s=50.0)
+    assert "Narrow passage: lining up" not in again.events
+    passage.odometry = Odometry()
+    later, _ = drive_past_gap(PARAMS, passage=passage, t0_s=50.0 + PARAMS.reject_s + 50.0)
+    assert "Narrow passage: through" in later.events
