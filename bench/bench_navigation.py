@@ -281,7 +281,9 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
         "\n\ndefault-yield: the default rule base with yielding to crossing traffic off (`YLD_ENABLE=0`, "
         "docs/perception.md); rows measured before yielding existed ran without it too. Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
-        "the split was added have it). Measured: the date of the run that made the row."
+        "the split was added have it). Measured: the date of the run that made the row. default+gap: narrow passages on "
+        "(`GAP_ENABLE=1`). The planner's persistent-obstacle map (`OMAP_ENABLE`, docs/perception.md) is on by default "
+        "since 2026-11-25; the default-yield rows of that date were measured before it existed."
     )
     if rulebase:
         markdown += (f"\n\n_This run: `--rulebase {rulebase}` against default on {', '.join(f'{n} seeds 1-{c}' for n, c in counts.items())}._")
