@@ -43,7 +43,8 @@ VARIANTS = {
     "paper": ("paper", []),
     "default": ("default", []),
     "default-yield": ("default", ["yielding.enabled=0"]),
-    "default+gap": ("default", ["passage.enabled=1"]),
+    "default+map": ("default", ["obstacle_map.enabled=1"]),
+    "default+map+gap": ("default", ["obstacle_map.enabled=1", "passage.enabled=1"]),
 }
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
@@ -281,9 +282,9 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
         "\n\ndefault-yield: the default rule base with yielding to crossing traffic off (`YLD_ENABLE=0`, "
         "docs/perception.md); rows measured before yielding existed ran without it too. Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
-        "the split was added have it). Measured: the date of the run that made the row. default+gap: narrow passages on "
-        "(`GAP_ENABLE=1`). The planner's persistent-obstacle map (`OMAP_ENABLE`, docs/perception.md) is on by default "
-        "since 2026-11-25; the default-yield rows of that date were measured before it existed."
+        "the split was added have it). Measured: the date of the run that made the row. default+map: the planner's "
+        "persistent-obstacle map on (`OMAP_ENABLE=1`, docs/perception.md); default+map+gap: that and narrow passages "
+        "(`GAP_ENABLE=1`). Both are off in the shipped default."
     )
     if rulebase:
         markdown += (f"\n\n_This run: `--rulebase {rulebase}` against default on {', '.join(f'{n} seeds 1-{c}' for n, c in counts.items())}._")

@@ -1,7 +1,7 @@
 """Persistent obstacles end to end (issue 12): emulator and daemon as processes, lockstep. In the
 benchmark's cul-de-sac (a U of walls open towards the rover on its leg) the rover, once its
 rangefinders have seen the U, has the walls in its planner's map and is planned out of the U and
-around it, instead of feeling its way along the walls (the daemon's defaults: the map is on)."""
+around it, instead of feeling its way along the walls (the map switched on: it is off by default)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ def test_in_the_cul_de_sac_the_rover_replans_around_the_walls_it_has_seen(tmp_pa
     mission, world = write_inputs(scenario, tmp_path)
     out = tmp_path / "run"
     metrics = simulate(SimOptions(mission=mission, out=out, world=world, seed=1, timeout_s=240.0,
-                                  config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}"]), plots=False)  # fmt: skip
+                                  config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}",
+                                                    "obstacle_map.enabled=1"]), plots=False)  # fmt: skip
     assert metrics["success"] and metrics["collisions"] == 0, metrics
 
     rows = list(csv.DictReader((out / "control.csv").open()))
