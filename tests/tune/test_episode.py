@@ -25,7 +25,11 @@ from rover_ctl.tuning.episode import Episode, episode_config
 from rover_ctl.tuning.scenarios import scenarios
 from rover_ctl.vocabulary import RoverMode
 
-PATH_TOLERANCE = 0.05
+PATH_TOLERANCE = 0.08
+"""Crossing seed 1 once drove 57.91 m in the runner against 54.54 m in SITL (6.2 %, 2026-11-25):
+where the rover meets a crossing drum depends on the GPS noise of the moment, which differs
+between the two runs (the SITL run arms on the wall clock), and the detour round it with it; the
+two agreed within 5 % in every earlier run of this test."""
 TIME_TOLERANCE = 0.20
 """Since yielding is on by default, a rover passing static drums now and then yields to an echo
 sliding over one (docs/perception.md) and stands for a few seconds; when it does depends on GPS
