@@ -591,8 +591,9 @@ class ObstacleMapParams:
     enabled: bool = False
     """Fold persistent obstacles into the planner's map (off: the planner knows only fences,
     known obstacles and the circles of a stuck rover). Off by default: with it on, `make demo`'s
-    mission met its looping walker in a way that ended in a collision in 3 of 18 runs (0 of 13
-    off; docs/perception.md)."""
+    mission met its looping walker in a way that ended in a collision in 3 of 18 runs (1 of 15
+    off: yielding's failure against a pacing walker, which the map makes likelier or not;
+    docs/perception.md)."""
     cell_m: float = 0.5
     """Side of a grid cell (m): the resolution of the persistent obstacles."""
     miss_score: float = 0.5
