@@ -60,6 +60,12 @@ RANGEFINDER_LAYOUTS = {
 """Rangefinder orientations (MAV_SENSOR_ORIENTATION) per named layout: the bundled six, the
 paper's four, a rover without a back one, none."""
 RANGEFINDER_MAX_M = 4.0
+FIRMWARE_NICE = 10
+"""Niceness added to the firmware's process. The firmware is the clock of the run: short of CPU,
+a deprioritised firmware only slows its own time, whereas a starved daemon falls behind the
+vehicle (its loop rate falls, and with it the speed it allows, SCHED_STEP_TRVL per step). On a
+rover the autopilot has its own processor; this keeps the daemon's share of this one closer to
+that."""
 SERIALS_DEFAULT_TCP = (1, 2)
 """SITL serials that otherwise open TCP servers on every address (ports 5762, 5763, fixed: a second
 firmware process fails to bind them); ``firmware_command`` turns off those it is not given."""
@@ -69,6 +75,15 @@ def firmware_path(directory: Path = FIRMWARE_DIR) -> Path | None:
     """The firmware binary, or None when ../shared/ardupilot is absent."""
     binary = directory / FIRMWARE
     return binary if binary.is_file() and os.access(binary, os.X_OK) else None
+
+
+def lower_priority(pid: int, nice: int) -> None:
+    """Add ``nice`` to process ``pid``'s niceness (at most 19); a no-op where the OS has no
+    niceness or refuses."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, min(19, os.getpriority(os.PRIO_PROCESS, pid) + nice))
+    except (AttributeError, OSError):
+        pass
 
 
 def extra_params(rangefinders: tuple[int, ...], wheel_encoders: bool = True) -> dict[str, float]:
@@ -174,6 +189,7 @@ class FirmwareRun(SimRun):
         self._logs += [sitl_log, sitl_out]
         self.sitl = FirmwareProcess(self._firmware_command(), cwd=self.workdir, stdin=subprocess.DEVNULL,
                                     stdout=sitl_out, stderr=sitl_log)  # fmt: skip
+        lower_priority(self.sitl.pid, FIRMWARE_NICE)
         self._connect_gcs()
         self.gcs.upload(self.mission)
 
