@@ -57,7 +57,9 @@ before it.
 
 A passage not done within ``timeout_s`` is given up; a gap given up or passed is not taken again
 for ``reject_s`` (found again within ``match_m`` of it). Giving up hands the rover back to the
-rule base, which goes round as it would have. While lining up and passing, the rule base does
+rule base, which goes round as it would have; given up while lined up or looking (*leave*), the
+rover first turns in place back along the wall as it was going: handed back square to the
+opening, the rule base saw a way ahead and nosed into the gap's edge. While lining up and passing, the rule base does
 not drive: the wall is in every sector, and the manoeuvre's moves are short, slow and checked.
 
 Pure: no clock, no I/O; times are passed in.
@@ -439,9 +441,20 @@ class Passage:
         goal = (odo.east_m + c * de - s * dn, odo.north_m + s * de + c * dn)
         return gap.coordinates(goal)[0] > self.params.standoff_m
 
-    def _give_up(self, time_s: float, why: str) -> None:
+    def _give_up(self, time_s: float, why: str, leave: bool = False) -> None:
+        """Hand back to the rule base; with ``leave``, after turning back along the wall."""
         self.events.append(f"Narrow passage: given up ({why})")
-        self._end(time_s)
+        if leave:
+            self.state, self._since_s = "leave", time_s
+        else:
+            self._end(time_s)
+
+    def _leave(self, time_s: float) -> Drive | None:
+        error = _wrap(math.atan2(self._inspect_along[1], self._inspect_along[0]) - self.odometry.heading_rad)
+        if abs(error) <= math.radians(self.params.heading_tol_deg) or time_s - self._since_s > self.params.timeout_s:
+            self._end(time_s)
+            return None
+        return self._turn(error)
 
     def _end(self, time_s: float) -> None:
         if self.gap is not None:
@@ -453,6 +466,8 @@ class Passage:
     def _manoeuvre(self, time_s: float, front: list[float]) -> Drive | None:
         p, gap, odo = self.params, self.gap, self.odometry
         assert gap is not None
+        if self.state == "leave":
+            return self._leave(time_s)
         if time_s - self._since_s > p.timeout_s:
             self._give_up(time_s, "timeout")
             return None
@@ -474,14 +489,14 @@ class Passage:
             return Drive(0.0, 0.0, self.state)
         if self.state == "look":
             if any(r <= nose_to_line + p.depth_m for r in front):
-                self._give_up(time_s, "the front beam does not see through")
-                return None
+                self._give_up(time_s, "the front beam does not see through", leave=True)
+                return self._leave(time_s)
             if time_s - self._look_from_s < p.look_s:
                 return Drive(0.0, 0.0, self.state)
             left, right = (self._diagonal_m.get(o, math.inf) for o in DIAGONALS)
             if not (math.isfinite(left) and math.isfinite(right)) or abs(left - right) > ALIGN_TOL_M:
-                self._give_up(time_s, "not square to the wall")
-                return None
+                self._give_up(time_s, "not square to the wall", leave=True)
+                return self._leave(time_s)
             self.state = "pass"
             self.events.append("Narrow passage: seen through, passing")
         if any(r <= p.stop_m for r in front) or any(r <= nose_to_line + p.depth_m for r in front if nose_to_line > 0.0):

@@ -109,7 +109,7 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
             )
         else:
             v, w = drive.speed_mps, drive.yaw_rate_radps
-            run.trace.append((drive.state, round(v, 3), round(w, 3)))
+            run.trace.append((drive.state, round(v, 3), round(w, 3), len(run.path)))  # the path's index after this step
         run.events += passage.events
         passage.events.clear()
         passage.odometry.on_gyro(t, -w)

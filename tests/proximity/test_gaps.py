@@ -148,3 +148,20 @@ def test_a_gap_given_up_or_passed_is_not_taken_again_until_reject_s():
     passage.odometry = Odometry()
     later, _ = drive_past_gap(PARAMS, passage=passage, t0_s=50.0 + PARAMS.reject_s + 50.0)
     assert "Narrow passage: through" in later.events
+
+
+def test_given_up_square_to_the_opening_the_rover_turns_back_along_the_wall(monkeypatch):
+    """Handed back while facing the opening, the rule base once nosed into its edge (a lockstep
+    SITL run, narrow_gap world 5): so the passage first turns back the way the rover was going."""
+    from rover_ctl.navigation import gaps
+
+    monkeypatch.setattr(gaps, "ALIGN_TOL_M", -1.0)  # no diagonal pair is ever alike: never square
+    run, _ = drive_past_gap(PARAMS)
+    assert "Narrow passage: given up (not square to the wall)" in run.events
+    states = [s for s, *_ in run.trace]
+    assert "leave" in states and "pass" not in states
+    last_leave = max(i for i, s in enumerate(states) if s == "leave")
+    assert states[last_leave - 1] == "leave" and states[:last_leave].count("look") > 0
+    _, _, heading = run.path[run.trace[last_leave][3]]  # handed back heading east, along the wall
+    assert abs(math.remainder(heading, math.tau)) <= math.radians(PARAMS.heading_tol_deg) + 0.05
+    assert run.crossing_x(WALL_Y) is None and run.min_clearance_m > 0.05
