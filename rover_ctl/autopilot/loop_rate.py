@@ -31,7 +31,6 @@ RATE_EVERY = 5
 """Steps between two computations of the rate (it moves slowly)."""
 
 
-
 class ControlTicks:
     """The control step's schedule in vehicle time: a tick every ``period_s()``; ticks missed in a
     gap of the vehicle's data are not replayed (the next one is a period after the gap)."""

@@ -59,8 +59,9 @@ A passage not done within ``timeout_s`` is given up; a gap given up or passed is
 for ``reject_s`` (found again within ``match_m`` of it). Giving up hands the rover back to the
 rule base, which goes round as it would have; given up while lined up or looking (*leave*), the
 rover first turns in place back along the wall as it was going: handed back square to the
-opening, the rule base saw a way ahead and nosed into the gap's edge. While lining up and passing, the rule base does
-not drive: the wall is in every sector, and the manoeuvre's moves are short, slow and checked.
+opening, the rule base saw a way ahead and nosed into the gap's edge. While lining up and
+passing, the rule base does not drive: the wall is in every sector, and the manoeuvre's moves
+are short, slow and checked.
 
 Pure: no clock, no I/O; times are passed in.
 """
@@ -450,6 +451,7 @@ class Passage:
             self._end(time_s)
 
     def _leave(self, time_s: float) -> Drive | None:
+        """Turn in place to head along the wall as when the inspection began; then hand back."""
         error = _wrap(math.atan2(self._inspect_along[1], self._inspect_along[0]) - self.odometry.heading_rad)
         if abs(error) <= math.radians(self.params.heading_tol_deg) or time_s - self._since_s > self.params.timeout_s:
             self._end(time_s)
