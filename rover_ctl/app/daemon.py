@@ -241,10 +241,12 @@ class Daemon:
             log.warning("vehicle link: %s below half the rate asked: asking again", ", ".join(short))
             self._request_streams()
 
-    def _report_link(self) -> None:
-        """Every ``link.health_period_s``: what the vehicle link carried, in the log and the event log."""
+    def _report_link(self, final: bool = False) -> None:
+        """Every ``link.health_period_s`` of wall time, and once more at shutdown (a lockstep run may
+        end before the first period does): what the vehicle link carried, in the log and the event
+        log. The counters (lost, bad CRC, garbage) are the whole run's."""
         now = time.monotonic()
-        if now < self._next_health_wall_s:
+        if now < self._next_health_wall_s and not final:
             return
         self._next_health_wall_s = now + self.config.link.health_period_s
         link = self.link
@@ -286,6 +288,7 @@ class Daemon:
             self.link.send_override(self.config.wheel_control.rc_trim_us, self.config.wheel_control.rc_trim_us)
             self.link.arm_async(False)
             log.info("stopped: motors neutral, disarm sent")
+            self._report_link(final=True)
         self.close()
 
     def close(self) -> None:
