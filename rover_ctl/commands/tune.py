@@ -34,7 +34,8 @@ def add_parser(subparsers) -> None:
                                                "local or remote Dask cluster (docs/tuning.md).")  # fmt: skip
     parser.add_argument("rulebase", metavar="RULEBASE", help="shipped name (default, paper) or a .toml rule base")
     parser.add_argument("--scenarios", required=True, metavar="NAME,...",
-                        help="open, scattered, walls, cul_de_sac, moving, crossing (comma-separated)")  # fmt: skip
+                        help="open, scattered, walls, cul_de_sac, moving, crossing, head_on, overtaking, narrow_gap, "
+                             "dense_clutter (comma-separated)")  # fmt: skip
     parser.add_argument("--worlds", type=_count, default=4, metavar="N", help="training worlds per scenario (default 4)")
     parser.add_argument("--generations", type=_count, default=30, metavar="G", help="CMA-ES generations (default 30)")
     parser.add_argument("--population", type=_count, default=8, metavar="P", help="candidates per generation (default 8, at least 2)")

@@ -12,6 +12,7 @@ from distributed import LocalCluster
 from rover_ctl.app.tune import Cluster, TuneOptions, draw_seeds, tune
 from rover_ctl.cli import main
 from rover_ctl.fuzzy import load_rulebase
+from rover_ctl.tuning import scenarios
 
 
 def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys):
@@ -70,6 +71,13 @@ def test_bad_flags_are_one_line_and_exit_2(tmp_path, capsys, flags, message):
     err = capsys.readouterr().err
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "t" / "checkpoint.pkl").exists()
+
+
+def test_the_help_names_every_scenario(capsys):
+    with pytest.raises(SystemExit):
+        main(["tune", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert all(name in text for name in scenarios.NAMES), (scenarios.NAMES, text)
 
 
 def test_the_local_cluster_listens_on_loopback_only():
