@@ -29,18 +29,19 @@ matrix products. The Joseph form is dropped there, and what it guards against do
 
 * symmetry: ``u u' / s`` is computed as the outer product ``v v'`` of ``v = u / sqrt(s)``, whose
   entries ``v_i v_j`` and ``v_j v_i`` are the same floating-point product, so a symmetric ``P``
-  stays exactly symmetric (``predict`` symmetrises what ``F P F'`` rounds off, ``update``'s
-  Joseph form is symmetric only to rounding: both leave ``P`` exactly symmetric for the next
-  scalar update);
+  stays exactly symmetric; ``predict`` symmetrises what ``F P F'`` rounds off, so ``P`` is
+  exactly symmetric before every scalar update. (``update``'s Joseph form is symmetric only to
+  rounding; the estimator no longer calls it.)
 * positive definiteness: the Joseph form also tolerates a gain that is not the optimal one,
   which cannot happen here (``K`` comes from the same ``u`` and ``s``). With the optimal gain
-  ``P - u u' / s`` is positive definite in exact arithmetic, its variance along ``h`` being
-  ``(h P h') r / (h P h' + r)``; rounding could only break that when a measurement shrinks a
-  variance by some 1e-15 (``r / (h P h' + r)`` near machine epsilon). The estimator's noises
-  have floors (``r`` >= (0.03 m/s)^2 for the wheels, ``compass_sigma_rad``^2, ``gps_min_sigma_m``^2)
-  and its variances are bounded by the initial ones, so the ratio stays above 1e-6.
-  tests/estimator/test_ekf.py checks that ``P`` stays symmetric with positive eigenvalues over
-  a run with a glitch, an outage and resets.
+  ``P - u u' / s`` is positive definite in exact arithmetic, its variance along ``h`` becoming
+  ``(h P h') r / (h P h' + r)``; rounding could only break that where a measurement shrinks a
+  variance by a factor near machine epsilon (``r / (h P h' + r)`` ~ 1e-16). The estimator's
+  noises have floors, and the smallest ratio it meets is about 4e-5 (a wheel reading,
+  ``r = (0.03 m/s)^2``, against the initial speed variance ``(5 m/s)^2``); an hour without wheel
+  readings would take it to some 1e-6. tests/estimator/test_ekf.py checks that ``P`` stays
+  exactly symmetric with positive eigenvalues after every reading of a run with a glitch, an
+  outage, a slide and a reset.
 
 The arithmetic is filterpy's ``ExtendedKalmanFilter``'s (tests/estimator/test_ekf.py runs both on
 the same sequences, ``update_scalar`` against filterpy's update with the 1 x n ``H``), written out
@@ -51,7 +52,7 @@ for two reasons measured on the daemon:
   estimator uses (docs/daemon.md, "On a companion computer", has the seconds and megabytes);
 * filterpy inverts ``S`` with scipy's general ``linalg.inv`` and forms the Joseph form with
   n x n products, whose call overheads cost more than the arithmetic on matrices this small
-  (``update_scalar``: 5 us against 14 us for ``update`` with a 1 x 7 ``H`` on the bench machine).
+  (``update_scalar``: 6 us against 14 us for ``update`` with a 1 x 7 ``H`` on the bench machine).
 """
 
 from __future__ import annotations

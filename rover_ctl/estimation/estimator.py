@@ -38,8 +38,9 @@ wander). Measurements (all linear but the wheels'):
 
 Why an EKF and not a UKF: the only nonlinearity is the heading in the position update, which is
 mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF with the exact
-Jacobian costs one 7x7 covariance product per reading, the UKF fifteen sigma points and an angle-
-aware mean, for no accuracy a rover can see.
+Jacobian costs one 7x7 covariance product per prediction and a rank-one update per measurement
+(each is a scalar, ``rover_ctl.estimation.ekf``), the UKF fifteen sigma points and an angle-aware
+mean, for no accuracy a rover can see.
 
 GPS gating and glitches: a fix is fused only if its innovation's Mahalanobis distance
 ``sqrt(y' S^-1 y)`` is within ``gate_sigma``. Rejected fixes leave the filter dead reckoning and

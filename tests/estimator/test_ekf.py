@@ -142,3 +142,22 @@ def test_estimator_matches_the_filterpy_path(monkeypatch):
         np.testing.assert_allclose([a.east_m, a.north_m, a.heading_rad, a.speed_mps, a.position_sigma_m],
                                    [b.east_m, b.north_m, b.heading_rad, b.speed_mps, b.position_sigma_m], rtol=0, atol=1e-7)  # fmt: skip
         np.testing.assert_allclose(a.cov, b.cov, rtol=1e-7, atol=1e-12)
+
+
+def test_a_changed_noise_parameter_applies_at_the_next_prediction():
+    """The estimator keeps Q/dt between predictions; a parameter a ground station changed must
+    still apply at the next one (params are read at every reading)."""
+    run = simulate(5.0, lambda t: 1.0, lambda t: 0.1, seed=4)
+    estimator = new_estimator()
+    feed(estimator, run.readings)
+    for name, value in (("speed_accel_per_sqrt_s", 2.0), ("lateral_slip_per_sqrt_s", 0.3), ("wheel_scale_walk_per_sqrt_s", 0.01)):
+        setattr(estimator.params, name, value)
+        p = estimator.params
+        kf = estimator._kf
+        x, before, dt_s = kf.x.copy(), kf.P.copy(), 0.02
+        _, f = estimator_module.motion_model(x, dt_s, estimator._rate_input_radps(estimator._time_s + dt_s))
+        q = np.diag([p.lateral_slip_per_sqrt_s**2, p.lateral_slip_per_sqrt_s**2, p.gyro_noise_rad_per_sqrt_s**2,
+                     p.speed_accel_per_sqrt_s**2, p.gyro_bias_walk_radps_per_sqrt_s**2,
+                     p.compass_offset_walk_rad_per_sqrt_s**2, p.wheel_scale_walk_per_sqrt_s**2]) * dt_s  # fmt: skip
+        assert estimator._advance(estimator._time_s + dt_s)
+        np.testing.assert_allclose(kf.P, f @ before @ f.T + q, rtol=1e-12, atol=1e-15)
