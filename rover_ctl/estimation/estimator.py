@@ -38,8 +38,9 @@ wander). Measurements (all linear but the wheels'):
 
 Why an EKF and not a UKF: the only nonlinearity is the heading in the position update, which is
 mild over one 20 ms step (the linearisation error is O(v dt psi_err^2)); an EKF with the exact
-Jacobian costs one 7x7 covariance product per reading, the UKF fifteen sigma points and an angle-
-aware mean, for no accuracy a rover can see.
+Jacobian costs one 7x7 covariance product per prediction and a rank-one update per measurement
+(each is a scalar, ``rover_ctl.estimation.ekf``), the UKF fifteen sigma points and an angle-aware
+mean, for no accuracy a rover can see.
 
 GPS gating and glitches: a fix is fused only if its innovation's Mahalanobis distance
 ``sqrt(y' S^-1 y)`` is within ``gate_sigma``. Rejected fixes leave the filter dead reckoning and
@@ -78,7 +79,7 @@ from typing import Callable
 import numpy as np
 
 from rover_ctl.config import EstimatorParams
-from rover_ctl.estimation.ekf import Ekf, solve_small
+from rover_ctl.estimation.ekf import Ekf
 from rover_ctl.estimation.frame import LocalFrame, compass_to_enu_rad, wrap_pi
 from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 
@@ -147,13 +148,31 @@ def _largest_eigenvalue_2x2(a: float, b: float, d: float) -> float:
 
 
 def _mahalanobis2(y: np.ndarray, cov: np.ndarray) -> float:
-    return float((y.T @ solve_small(cov, y))[0, 0])
+    """``y' S^-1 y`` for a 2-vector ``y`` (2 x 1) and a symmetric positive definite 2 x 2 ``S``,
+    in closed form: ``(d y0^2 - 2 b y0 y1 + a y1^2) / (a d - b^2)`` for ``S = [[a, b], [b, d]]``."""
+    return _mahalanobis2_floats(y.item(0), y.item(1), cov.item(0, 0), cov.item(0, 1), cov.item(1, 1))
 
 
-def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndarray, np.ndarray]:
+def _mahalanobis2_floats(y0: float, y1: float, a: float, b: float, d: float) -> float:
+    """``_mahalanobis2`` on plain numbers: ``y = (y0, y1)``, ``S = [[a, b], [b, d]]``."""
+    return (d * y0 * y0 - 2.0 * b * y0 * y1 + a * y1 * y1) / (a * d - b * b)
+
+
+def motion_model(
+    x: np.ndarray, dt_s: float, gyro_radps: float, jacobian: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """State ``x`` (7x1) propagated ``dt_s`` with the gyro rate ``gyro_radps`` (ENU), and the
-    Jacobian ``F = d x' / d x``."""
-    psi, v, bias = float(x[PSI, 0]), float(x[V, 0]), float(x[BIAS, 0])
+    Jacobian ``F = d x' / d x``: the identity but for
+
+        dE/dpsi = -v dt sin m      dE/dv = dt cos m      dE/db =  v dt^2 sin(m) / 2
+        dN/dpsi =  v dt cos m      dN/dv = dt sin m      dN/db = -v dt^2 cos(m) / 2
+        dpsi/db = -dt
+
+    (``m`` the mid-point heading; ``d m / d b = -dt / 2``). ``jacobian``: a 7x7 buffer to write
+    ``F`` into instead of a new array (the estimator's, reused at every prediction); only these
+    seven entries are written, so it must hold the identity everywhere else, as it does when it
+    starts as ``np.eye(7)`` and is only ever passed here."""
+    psi, v, bias = x.item(PSI), x.item(V), x.item(BIAS)
     w = gyro_radps - bias
     mid = psi + 0.5 * w * dt_s
     c, s = math.cos(mid), math.sin(mid)
@@ -161,7 +180,7 @@ def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndar
     out[E, 0] += v * dt_s * c
     out[N, 0] += v * dt_s * s
     out[PSI, 0] = wrap_pi(psi + w * dt_s)
-    jac = np.eye(_DIM)
+    jac = np.eye(_DIM) if jacobian is None else jacobian
     jac[E, PSI] = -v * dt_s * s
     jac[E, V] = dt_s * c
     jac[E, BIAS] = 0.5 * v * dt_s * dt_s * s  # d mid / d b = -dt/2
@@ -172,36 +191,21 @@ def motion_model(x: np.ndarray, dt_s: float, gyro_radps: float) -> tuple[np.ndar
     return out, jac
 
 
-def _linear(*rows: tuple[int, ...]) -> np.ndarray:
-    """A linear measurement's H (h(x) = H x), each row the sum of some state components."""
-    h = np.zeros((len(rows), _DIM))
-    for i, components in enumerate(rows):
-        h[i, list(components)] = 1.0
+def _unit_row(*components: int) -> np.ndarray:
+    """A linear scalar measurement's Jacobian row (h(x) = h x): ones at ``components``. Read-only:
+    shared by every estimator."""
+    h = np.zeros(_DIM)
+    h[list(components)] = 1.0
+    h.flags.writeable = False
     return h
 
 
-_H_POS = _linear((E,), (N,))
-_H_COMPASS = _linear((PSI, COMPASS))
-_H_PSI_V = _linear((PSI,), (V,))
-
-
-def _h_wheels(x: np.ndarray) -> np.ndarray:
-    """Jacobian of the wheel speed ``k v``."""
-    h = np.zeros((1, _DIM))
-    h[0, V] = x[SCALE, 0]
-    h[0, SCALE] = x[V, 0]
-    return h
-
-
-def _angle_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
-    return wrap_pi(z - hx)
-
-
-def _heading_first_residual(z: np.ndarray, hx: np.ndarray) -> np.ndarray:
-    """Residual of (heading, other): the heading part wrapped to [-pi, pi)."""
-    y = z - hx
-    y[0, 0] = wrap_pi(y[0, 0])
-    return y
+_H_E = _unit_row(E)
+_H_N = _unit_row(N)
+_H_PSI = _unit_row(PSI)
+_H_V = _unit_row(V)
+_H_COMPASS = _unit_row(PSI, COMPASS)
+_EYE2 = np.eye(2)
 
 
 class PoseEstimator:
@@ -224,6 +228,12 @@ class PoseEstimator:
     def _clear(self) -> None:
         """Forget everything: the state before the first reading."""
         self._kf = Ekf(_DIM)
+        self._jacobian = np.eye(_DIM)
+        """The motion model's Jacobian, rewritten in place at every prediction."""
+        self._h_wheels = np.zeros(_DIM)
+        """The wheel speed's Jacobian row, rewritten in place at every wheel reading."""
+        self._q_densities: tuple[float, ...] | None = None
+        self._q_per_s = np.zeros((_DIM, _DIM))
         self._time_s = -math.inf
         self._initialised = False
         self._gyro_radps = 0.0
@@ -249,24 +259,26 @@ class PoseEstimator:
         if not self._initialised:
             nan = math.nan
             return Pose(self._time_s, nan, nan, nan, nan, nan, np.full((3, 3), nan), False, False, nan, nan)
-        x, p = self._kf.x[:, 0], self._kf.P
-        cov = p[:3, :3].copy()
-        position_sigma_m = math.sqrt(max(_largest_eigenvalue_2x2(cov[0, 0], cov[0, 1], cov[1, 1]), 0.0))
-        heading_sigma_rad = math.sqrt(max(float(cov[2, 2]), 0.0))
+        east_m, north_m, heading_rad, speed_mps, bias = self._kf.x[:5, 0].tolist()
+        cov = self._kf.P[:3, :3].copy()
+        var_e, cov_en, var_psi, var_n = cov.item(0, 0), cov.item(0, 1), cov.item(2, 2), cov.item(1, 1)
+        position_sigma_m = math.sqrt(max(_largest_eigenvalue_2x2(var_e, cov_en, var_n), 0.0))
+        heading_sigma_rad = math.sqrt(max(var_psi, 0.0))
+        params = self.params
         healthy = (
-            position_sigma_m <= self.params.health_max_position_sigma_m
-            and heading_sigma_rad <= self.params.health_max_heading_sigma_rad
+            position_sigma_m <= params.health_max_position_sigma_m and heading_sigma_rad <= params.health_max_heading_sigma_rad
         )
+        time_s = float(self._time_s)
         return Pose(
-            time_s=float(self._time_s),
-            east_m=float(x[E]),
-            north_m=float(x[N]),
-            heading_rad=float(x[PSI]),
-            speed_mps=float(x[V]),
-            yaw_rate_radps=self._rate_input_radps(self._time_s) - float(x[BIAS]),
+            time_s=time_s,
+            east_m=east_m,
+            north_m=north_m,
+            heading_rad=heading_rad,
+            speed_mps=speed_mps,
+            yaw_rate_radps=self._rate_input_radps(time_s) - bias,
             cov=cov,
             healthy=bool(healthy),
-            gps_ok=bool(self._time_s - self._gps_fused_s <= self.params.gps_timeout_s),
+            gps_ok=bool(time_s - self._gps_fused_s <= params.gps_timeout_s),
             position_sigma_m=position_sigma_m,
             heading_sigma_rad=heading_sigma_rad,
         )
@@ -293,8 +305,11 @@ class PoseEstimator:
         if not self._advance(r.time_s):
             return
         sigma = self.params.wheel_speed_sigma_mps + self.params.wheel_slip_fraction * abs(speed_mps)
-        x = self._kf.x
-        self._kf.update(np.array([[speed_mps]]), _h_wheels(x), np.array([[x[SCALE, 0] * x[V, 0]]]), np.array([[sigma * sigma]]))
+        kf = self._kf
+        v, k = kf.x.item(V), kf.x.item(SCALE)
+        h = self._h_wheels  # d(k v)/dx: k at v, v at k, zero elsewhere
+        h[V], h[SCALE] = k, v
+        kf.update_scalar(speed_mps - k * v, h, sigma * sigma)
 
     def on_attitude(self, r: Attitude) -> None:
         """Gyro rate for the prediction from now on, and the compass heading as a measurement."""
@@ -315,10 +330,11 @@ class PoseEstimator:
             return
         self._gyro_radps = -r.yaw_rate_radps  # NED clockwise -> ENU counter-clockwise
         lag_s = self._time_s - r.time_s
-        z = wrap_pi(heading_rad + (self._gyro_radps - float(self._kf.x[BIAS, 0])) * lag_s)
+        kf = self._kf
+        z = wrap_pi(heading_rad + (self._gyro_radps - kf.x.item(BIAS)) * lag_s)
         sigma = self.params.compass_sigma_rad
-        self._kf.update(np.array([[z]]), _H_COMPASS, _H_COMPASS @ self._kf.x, np.array([[sigma * sigma]]), _angle_residual)
-        self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
+        kf.update_scalar(wrap_pi(z - (kf.x.item(PSI) + kf.x.item(COMPASS))), _H_COMPASS, sigma * sigma)
+        kf.x[PSI, 0] = wrap_pi(kf.x.item(PSI))
 
     def on_gps(self, r: GpsFix) -> GpsVerdict:
         """Fuse, reject (gate) or reset to a fix; see the module docstring."""
@@ -340,26 +356,29 @@ class PoseEstimator:
             return GpsVerdict.RESET
         if not self._advance(r.time_s):
             return GpsVerdict.IGNORED
-        x = self._kf.x[:, 0]
+        kf = self._kf
+        x_e, x_n, psi, v = kf.x[:4, 0].tolist()
         lag_s = self._time_s - r.time_s
-        z = np.array([[east_m + x[V] * lag_s * math.cos(x[PSI])], [north_m + x[V] * lag_s * math.sin(x[PSI])]])
-        r_cov = np.eye(2) * sigma_m * sigma_m
-        innovation = z - _H_POS @ self._kf.x
-        s_cov = self._kf.P[:2, :2] + r_cov
+        z_e, z_n = east_m + v * lag_s * math.cos(psi), north_m + v * lag_s * math.sin(psi)
+        var = sigma_m * sigma_m
+        innovation = np.array([[z_e - x_e], [z_n - x_n]])
+        s_cov = kf.P[:2, :2] + var * _EYE2
         distance2 = _mahalanobis2(innovation, s_cov)
         glitch = self._disagreement
         if distance2 <= self.params.gate_sigma**2 and not (
             glitch is not None and glitch.is_jump and _mahalanobis2(innovation - glitch.offset, s_cov) < distance2
         ):
             tracking = self._time_s - self._gps_fused_s <= self.params.gps_timeout_s
-            self._kf.update(z, _H_POS, _H_POS @ self._kf.x, r_cov)
+            # (e, n) with R = var I, one after the other: the same as fusing them together
+            kf.update_scalar(z_e - x_e, _H_E, var)
+            kf.update_scalar(z_n - kf.x.item(N), _H_N, var)
             self._disagreement = None
             alpha = 1.0 - math.exp(-(self._time_s - self._gps_fused_s) / self.params.glitch_innovation_tau_s)
             self._innovation_mean = self._innovation_mean + alpha * (innovation - self._innovation_mean) if tracking else innovation
             self._gps_fused_s = self._time_s
             verdict = GpsVerdict.ACCEPTED
         elif self._judge_rejection(r.time_s, innovation, s_cov):
-            self._reset_position(z, r_cov)
+            self._reset_position(np.array([[z_e], [z_n]]), var * _EYE2)
             verdict = GpsVerdict.RESET
         else:
             verdict = GpsVerdict.REJECTED
@@ -403,21 +422,25 @@ class PoseEstimator:
         p = self.params
         if not (math.isfinite(r.course_deg) and math.isfinite(r.speed_mps)) or r.speed_mps < p.gps_course_min_speed_mps:
             return
-        x = self._kf.x[:, 0]
+        kf = self._kf
+        psi, v, bias = kf.x.item(PSI), kf.x.item(V), kf.x.item(BIAS)
         track_rad = compass_to_enu_rad(math.radians(r.course_deg))
         speed_mps = r.speed_mps
-        if x[V] < 0.0:  # reversing: the rover points against its track
+        if v < 0.0:  # reversing: the rover points against its track
             track_rad += math.pi
             speed_mps = -speed_mps
-        z = np.array([[wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - x[BIAS]) * lag_s)], [speed_mps]])
-        course_sigma = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps)
-        r_cov = np.diag([course_sigma**2, p.gps_velocity_sigma_mps**2])
-        hx = _H_PSI_V @ self._kf.x
-        innovation = _heading_first_residual(z, hx)
-        if _mahalanobis2(innovation, self._kf.P[np.ix_((PSI, V), (PSI, V))] + r_cov) > p.gate_sigma**2:
+        z_psi = wrap_pi(track_rad + (self._rate_input_radps(self._time_s) - bias) * lag_s)
+        course_var = math.atan2(p.gps_velocity_sigma_mps, r.speed_mps) ** 2
+        speed_var = p.gps_velocity_sigma_mps**2
+        y_psi, y_v = wrap_pi(z_psi - psi), speed_mps - v
+        cov = kf.P
+        distance2 = _mahalanobis2_floats(y_psi, y_v, cov.item(PSI, PSI) + course_var, cov.item(PSI, V), cov.item(V, V) + speed_var)
+        if distance2 > p.gate_sigma**2:
             return  # a velocity glitch, or crabbing (a slide) the model has no state for
-        self._kf.update(z, _H_PSI_V, hx, r_cov, _heading_first_residual)
-        self._kf.x[PSI, 0] = wrap_pi(self._kf.x[PSI, 0])
+        # course and speed (R diagonal), one after the other: the same as fusing them together
+        kf.update_scalar(y_psi, _H_PSI, course_var)
+        kf.update_scalar(speed_mps - kf.x.item(V), _H_V, speed_var)
+        kf.x[PSI, 0] = wrap_pi(kf.x.item(PSI))
 
     def _advance(self, time_s: float) -> bool:
         """Predict forward to ``time_s`` if it is newer; False if it is too old to use."""
@@ -426,29 +449,35 @@ class PoseEstimator:
         dt_s = time_s - self._time_s
         if dt_s <= 0.0:
             return -dt_s <= self.params.max_lag_s
-        p = self.params
-        q = np.diag(
-            [
-                p.lateral_slip_per_sqrt_s**2,
-                p.lateral_slip_per_sqrt_s**2,
-                p.gyro_noise_rad_per_sqrt_s**2,
-                p.speed_accel_per_sqrt_s**2,
-                p.gyro_bias_walk_radps_per_sqrt_s**2,
-                p.compass_offset_walk_rad_per_sqrt_s**2,
-                p.wheel_scale_walk_per_sqrt_s**2,
-            ]
-        ) * dt_s
-        x, jacobian = motion_model(self._kf.x, dt_s, self._rate_input_radps(time_s))
-        self._kf.predict(x, jacobian, q)
+        x, jacobian = motion_model(self._kf.x, dt_s, self._rate_input_radps(time_s), self._jacobian)
+        self._kf.predict(x, jacobian, self._process_noise_density() * dt_s)
         self._time_s = time_s
         return True
+
+    def _process_noise_density(self) -> np.ndarray:
+        """``Q / dt = diag(s_lat^2, s_lat^2, s_gyro^2, s_acc^2, s_bias^2, s_comp^2, s_k^2)`` from the
+        parameters in force, rebuilt only when one of them changed."""
+        p = self.params
+        densities = (
+            p.lateral_slip_per_sqrt_s,
+            p.gyro_noise_rad_per_sqrt_s,
+            p.speed_accel_per_sqrt_s,
+            p.gyro_bias_walk_radps_per_sqrt_s,
+            p.compass_offset_walk_rad_per_sqrt_s,
+            p.wheel_scale_walk_per_sqrt_s,
+        )
+        if densities != self._q_densities:
+            lat, gyro, acc, bias, comp, scale = densities
+            self._q_per_s = np.diag([lat**2, lat**2, gyro**2, acc**2, bias**2, comp**2, scale**2])
+            self._q_densities = densities
+        return self._q_per_s
 
     def _rate_input_radps(self, time_s: float) -> float:
         """The gyro rate, or without a recent gyro the wheels' turn rate plus the bias estimate
         (the model subtracts the bias, which only the gyro has)."""
         if time_s - self._last_attitude_s <= self.params.attitude_timeout_s:
             return self._gyro_radps
-        return self._wheel_turn_radps / float(self._kf.x[SCALE, 0]) + float(self._kf.x[BIAS, 0])
+        return self._wheel_turn_radps / self._kf.x.item(SCALE) + self._kf.x.item(BIAS)
 
     def _try_initialise(self) -> None:
         if self._pending_fix is None or self._pending_heading is None:
