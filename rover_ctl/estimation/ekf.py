@@ -4,34 +4,27 @@
 
     P = F P F' + Q                      (then symmetrised: P = (P + P') / 2)
 
-``update`` fuses a measurement ``z`` (m x 1) with Jacobian ``H`` (m x n), prediction ``h(x)`` and
-noise ``R``::
+``update_scalar`` fuses one measurement ``z`` with Jacobian row ``h`` (1 x n), prediction ``h(x)``
+and noise variance ``r``: the EKF update ``S = H P H' + R``, ``K = P H' S^-1``, ``x += K y``,
+``P = (I - K H) P`` for m = 1, in closed form. Every measurement the estimator makes is one (its
+two-dimensional ones, the GPS position and the GPS course and speed, have a diagonal ``R`` and are
+fused one component after the other, which gives the same posterior as the joint update)::
 
-    y = z - h(x)        (or an angle-aware residual)
-    S = H P H' + R
-    K = P H' S^-1
-    x = x + K y
-    P = (I - K H) P (I - K H)' + K R K'  (Joseph form: symmetric and positive with rounding)
-
-``update_scalar`` is the same for one measurement (m = 1) in closed form, which is every
-measurement the estimator makes (its two-dimensional ones, the GPS position and the GPS course
-and speed, have a diagonal ``R`` and are fused one component after the other, which gives the same
-posterior)::
-
+    y = z - h(x)        (or an angle-aware residual, wrapped by the caller)
     u = P h'            (n,)  the column P H'; P's column i when h is the unit row e_i
     s = h u + r               innovation variance (a scalar: no inverse)
     K = u / s
     x = x + K y
     P = P - u u' / s    (= P - K H P)
 
-It costs a matrix-vector product and an outer product instead of the Joseph form's three n x n
-matrix products. The Joseph form is dropped there, and what it guards against does not arise:
+It costs a matrix-vector product and an outer product instead of the Joseph form
+``P = (I - K H) P (I - K H)' + K R K'`` (filterpy's) and its three n x n matrix products. What the
+Joseph form guards against does not arise here:
 
 * symmetry: ``u u' / s`` is computed as the outer product ``v v'`` of ``v = u / sqrt(s)``, whose
   entries ``v_i v_j`` and ``v_j v_i`` are the same floating-point product, so a symmetric ``P``
   stays exactly symmetric; ``predict`` symmetrises what ``F P F'`` rounds off, so ``P`` is
-  exactly symmetric before every scalar update. (``update``'s Joseph form is symmetric only to
-  rounding; the estimator no longer calls it.)
+  exactly symmetric before every scalar update (the Joseph form is symmetric only to rounding).
 * positive definiteness: the Joseph form also tolerates a gain that is not the optimal one,
   which cannot happen here (``K`` comes from the same ``u`` and ``s``). With the optimal gain
   ``P - u u' / s`` is positive definite in exact arithmetic, its variance along ``h`` becoming
@@ -52,30 +45,14 @@ for two reasons measured on the daemon:
   estimator uses (docs/daemon.md, "On a companion computer", has the seconds and megabytes);
 * filterpy inverts ``S`` with scipy's general ``linalg.inv`` and forms the Joseph form with
   n x n products, whose call overheads cost more than the arithmetic on matrices this small
-  (``update_scalar``: 6 us against 14 us for ``update`` with a 1 x 7 ``H`` on the bench machine).
+  (``update_scalar``: 6 us against 14 us for the general Joseph-form update with a 1 x 7 ``H``
+  on the bench machine).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Callable
-
 import numpy as np
-
-Residual = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-def solve_small(s: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``S^-1 b`` for a symmetric positive definite ``S``: closed formulas for 1x1 and 2x2."""
-    n = s.shape[0]
-    if n == 1:
-        return b / s[0, 0]
-    if n == 2:
-        a, c, d = s[0, 0], s[0, 1], s[1, 1]
-        inverse = np.array([[d, -c], [-c, a]])
-        return (inverse @ b) / (a * d - c * c)
-    return np.linalg.solve(s, b)
-
 
 class Ekf:
     """State ``x`` (n x 1) and covariance ``P`` (n x n), set directly by the estimator."""
@@ -83,7 +60,6 @@ class Ekf:
     def __init__(self, dim_x: int) -> None:
         self.x = np.zeros((dim_x, 1))
         self.P = np.eye(dim_x)
-        self._eye = np.eye(dim_x)
 
     def predict(self, x: np.ndarray, jacobian: np.ndarray, q: np.ndarray) -> None:
         """The state propagated by the motion model, its Jacobian ``F`` and the process noise ``Q``:
@@ -95,17 +71,6 @@ class Ekf:
         p *= 0.5
         self.x = x
         self.P = p
-
-    def update(self, z: np.ndarray, h: np.ndarray, hx: np.ndarray, r: np.ndarray, residual: Residual | None = None) -> None:
-        """Fuse measurement ``z`` (m x 1) with Jacobian ``H`` (m x n), prediction ``hx`` = h(x) and
-        noise ``R`` (Joseph form)."""
-        pht = self.P @ h.T
-        s = h @ pht + r
-        gain = solve_small(s, pht.T).T  # P H' S^-1, S symmetric
-        y = z - hx if residual is None else residual(z, hx)
-        self.x = self.x + gain @ y
-        i_kh = self._eye - gain @ h
-        self.P = i_kh @ self.P @ i_kh.T + gain @ r @ gain.T
 
     def update_scalar(self, y: float, h: np.ndarray, r: float) -> None:
         """Fuse one measurement given its innovation ``y = z - h(x)`` (wrapped by the caller if an

@@ -15,7 +15,7 @@ from estimator.synthetic import Sensors, feed, simulate
 from estimator.test_estimator import new_estimator, run_filter
 from rover_ctl.estimation import estimator as estimator_module
 from rover_ctl.estimation.estimator import GpsVerdict
-from rover_ctl.estimation.ekf import Ekf, solve_small
+from rover_ctl.estimation.ekf import Ekf
 from rover_ctl.estimation.frame import wrap_pi
 
 filterpy_kalman = pytest.importorskip("filterpy.kalman", reason="filterpy (the test extra) is the reference")
@@ -47,30 +47,6 @@ class FilterpyEkf(filterpy_kalman.ExtendedKalmanFilter):
 def random_spd(rng: np.random.Generator, n: int) -> np.ndarray:
     a = rng.normal(size=(n, n))
     return a @ a.T + n * np.eye(n)
-
-
-@pytest.mark.parametrize("n", [1, 2, 3])
-def test_solve_small_matches_numpy(n):
-    rng = np.random.default_rng(n)
-    for _ in range(50):
-        s, b = random_spd(rng, n), rng.normal(size=(n, 7))
-        np.testing.assert_allclose(solve_small(s, b), np.linalg.solve(s, b), rtol=1e-10, atol=1e-12)
-
-
-def test_steps_match_filterpy():
-    rng = np.random.default_rng(7)
-    ours, theirs = Ekf(7), FilterpyEkf(7)
-    for _ in range(200):
-        x, f, q = rng.normal(size=(7, 1)), np.eye(7) + 0.1 * rng.normal(size=(7, 7)), 0.01 * random_spd(rng, 7)
-        for kf in (ours, theirs):
-            kf.predict(x.copy(), f, q)
-        m = int(rng.integers(1, 3))
-        h, r, z = rng.normal(size=(m, 7)), random_spd(rng, m), rng.normal(size=(m, 1))
-        residual = (lambda a, b: wrap_pi(a - b)) if m == 1 and rng.random() < 0.5 else None
-        for kf in (ours, theirs):
-            kf.update(z, h, h @ kf.x, r, residual)
-        np.testing.assert_allclose(ours.x, theirs.x, rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(ours.P, theirs.P, rtol=1e-9, atol=1e-12)
 
 
 def test_scalar_update_matches_filterpy():
