@@ -562,6 +562,12 @@ class PassageParams:
     """Passing: a front echo nearer than this (m) stops the rover and gives the gap up."""
     exit_m: float = 0.3
     """The passage is over when the rover's back is this far (m) beyond the wall's line."""
+    search_m: float = 3.0
+    """A wall across the way to the goal that a side beam has followed this far (m) without a
+    narrow opening found is searched back the other way, at ``speed_mps``, to this far beyond
+    where its echoes began: the rule base turns one way at a wall (east, in the benchmark), so an
+    opening behind it, or passed while it turned, is never swept. 0: never. Costs about
+    ``2 search_m / speed_mps`` plus two half turns where there is nothing to find."""
     timeout_s: float = 40.0
     """A passage not through after this long (s) is given up ..."""
     reject_s: float = 60.0

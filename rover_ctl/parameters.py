@@ -420,6 +420,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("passage.lookahead_m", "GAP_LOOKAHEAD", 0.1, 5.0, RW, {}),
     ("passage.stop_m", "GAP_STOP", 0.0, 2.0, RW, {}),
     ("passage.exit_m", "GAP_EXIT", 0.0, 5.0, RW, {}),
+    ("passage.search_m", "GAP_SEARCH", 0.0, 20.0, RW, {}),
     ("passage.timeout_s", "GAP_TIMEOUT", 1.0, 600.0, RW, {}),
     ("passage.reject_s", "GAP_REJECT", 0.0, 3600.0, RW, {}),
 )

@@ -5,7 +5,9 @@ The wall runs along x at ``wall_y`` (0.3 m thick, from x = -6 to 6) with an open
 emulator's (sitl/params.py), reporting the nearest hit up to 4 m. Until the passage drives, a
 stand-in for the rule base drives along the wall at ``cruise_mps``; once through, it heads for
 the goal. The passage gets what the autopilot gives it: wheel distances, the gyro's yaw rate
-(NED), readings, and the pose (here the truth, or the truth plus a drifting offset)."""
+(NED), readings, and the pose (here the truth, or the truth plus a drifting offset). With
+``yaw_lag_s`` the rover turns at its commanded yaw rate only after a first-order lag, so that it
+coasts on after a turn in place is stopped, as the emulator's skid-steer rover does."""
 
 from __future__ import annotations
 
@@ -77,7 +79,7 @@ def _ray(ox: float, oy: float, angle: float, boxes) -> float:
 def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 0.6, wall_y: float = 3.0,
                    start: tuple[float, float, float] = (-2.0, 1.9, 0.0), cruise_mps: float = 0.5, t0_s: float = 0.0,
                    duration_s: float = 40.0, behind_m: float | None = None, passage: Passage | None = None,
-                   pose_drift_mps: float = 0.0, seed: int = 0) -> tuple[Run, Passage]:  # fmt: skip
+                   pose_drift_mps: float = 0.0, seed: int = 0, yaw_lag_s: float = 0.0) -> tuple[Run, Passage]:  # fmt: skip
     """Drive the scene; ``pose_drift_mps``: the pose given as 'fused' drifts from the truth this fast."""
     rng, drift_rng = np.random.default_rng(seed), np.random.default_rng(seed + 1)
     passage = passage or Passage(params, lambda: LENGTH, lambda: WIDTH)
@@ -88,6 +90,7 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
     goal = (gap_x, wall_y + 10.0)
     run, dt, through = Run(), 0.04, False
     drift = np.zeros(2)
+    yaw_rate = 0.0
     for k in range(int(duration_s / dt)):
         t = t0_s + k * dt
         passage.odometry.on_wheels(left, right)
@@ -112,6 +115,8 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
             run.trace.append((drive.state, round(v, 3), round(w, 3), len(run.path)))  # the path's index after this step
         run.events += passage.events
         passage.events.clear()
+        yaw_rate = w if yaw_lag_s <= 0.0 else yaw_rate + (w - yaw_rate) * min(1.0, dt / yaw_lag_s)
+        w = yaw_rate
         passage.odometry.on_gyro(t, -w)
         x, y, h = x + v * math.cos(h) * dt, y + v * math.sin(h) * dt, h + w * dt
         left, right = left + (v - w * TRACK / 2) * dt, right + (v + w * TRACK / 2) * dt
