@@ -505,6 +505,8 @@ class Planner:
 
     def expire(self, now_s: float) -> bool:
         """Forget blocked circles older than ``blocked_ttl_s``; True if any went."""
+        if not self._blocked:  # the usual case, at every control step
+            return False
         kept = [(t, c) for t, c in self._blocked if now_s - t < self.params.blocked_ttl_s]
         if len(kept) == len(self._blocked):
             return False

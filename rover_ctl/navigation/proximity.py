@@ -61,14 +61,19 @@ class ObstacleMemory:
         self.tracker = ObstacleTracker(params)
         self._tracking = tracking
 
-    def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
-        """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
-        body = ORIENTATION_RAD[orientation % 8]
-        forward_sign, left_sign = _EDGE[orientation % 8]
-        forward = self._length_m() / 2.0 * forward_sign
-        left = self._width_m() / 2.0 * left_sign
+    def _sensor_poses(self, orientations, east_m: float, north_m: float, heading_rad: float) -> list[tuple[float, float, float]]:
+        """(east_m, north_m, axis_rad) in ENU of each sensor, on the footprint's edge."""
+        half_length, half_width = self._length_m() / 2.0, self._width_m() / 2.0
         c, s = math.cos(heading_rad), math.sin(heading_rad)
-        return east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + body
+        poses = []
+        for orientation in orientations:
+            forward_sign, left_sign = _EDGE[orientation % 8]
+            forward, left = half_length * forward_sign, half_width * left_sign
+            poses.append((east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + ORIENTATION_RAD[orientation % 8]))
+        return poses
+
+    def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
+        return self._sensor_poses((orientation,), east_m, north_m, heading_rad)[0]
 
     def sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
         """(east_m, north_m, axis_rad) in ENU of the sensor of ``orientation`` on a rover at this pose."""
@@ -94,17 +99,15 @@ class ObstacleMemory:
         if self._added:
             self._points = np.vstack((self._points, self._added))
             self._added = []
-        self._points = self._points[self._points[:, 0] > time_s - self.params.memory_s]
+        self._points = self._points.compress(self._points[:, 0] > time_s - self.params.memory_s, axis=0)
         points = self._points[:, 1:3]
         if self.params.horizon_s > 0.0:
             points = self._predicted(time_s, (speed_mps * math.cos(heading_rad), speed_mps * math.sin(heading_rad)))
         if not len(points) or not latest_m:
             return dict(latest_m)
         # Every sensor at once, a row each: numpy's cost is per call, and the points are few.
-        sensors = []
-        for orientation in latest_m:
-            e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
-            sensors.append((e, n, math.cos(axis), math.sin(axis)))  # math's: numpy's vectorised ones may round differently
+        sensors = [(e, n, math.cos(axis), math.sin(axis))  # math's: numpy's vectorised ones may round differently
+                   for e, n, axis in self._sensor_poses(latest_m, east_m, north_m, heading_rad)]  # fmt: skip
         e, n, cos_axis, sin_axis = np.array(sensors).T[:, :, None]
         d_east, d_north = points[:, 0] - e, points[:, 1] - n
         distance = np.hypot(d_east, d_north)
