@@ -203,7 +203,7 @@ class Path:
             lo, hi = max(s0, s_min_m), min(s1, s_max_m)
             if lo > hi:
                 continue  # the window misses this segment
-            t = ((px - ax) * dx + (py - ay) * dy) / length2 if length > 0 else 0.0
+            t = ((px - ax) * dx + (py - ay) * dy) / length2 if length2 > 0 else 0.0
             s = min(max(s0 + t * length, lo), hi)
             f = (s - s0) / length if length > 0 else 0.0
             nx, ny = ax + f * dx, ay + f * dy
