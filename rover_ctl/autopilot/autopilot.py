@@ -73,6 +73,8 @@ LOG_COLUMNS = (
     "map_obstacles",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
+_EMPTY_ROW = dict.fromkeys(LOG_COLUMNS, "")
+"""A step's row before it is filled (copied each step: cheaper than building it)."""
 RANGE_COLUMNS = {0: "range_front_m", 1: "range_front_right_m", 2: "range_right_m", 4: "range_back_m",
                  6: "range_left_m", 7: "range_front_left_m"}  # fmt: skip
 STATION_SEQ = 0
@@ -398,7 +400,7 @@ class Autopilot:
                 and t_s >= since + self.config.link.rangefinder_discovery_s:  # fmt: skip
             self._plan_rangefinders(set(readings.ranges))
         decision = self._failsafe(t_s, pose, readings)
-        row: dict[str, Any] = dict.fromkeys(LOG_COLUMNS, "")
+        row: dict[str, Any] = _EMPTY_ROW.copy()
         row.update(t_s=t_s, mode=int(self.mode), armed=int(self.armed), failsafe="+".join(decision.reasons))
         if loop.rate_hz is not None:
             row.update(loop_rate_hz=round(loop.rate_hz, 2))

@@ -67,6 +67,8 @@ class Action(enum.IntEnum):
 RANGE_INTERVAL_GAIN = 0.2
 """Smoothing of the measured interval between rangefinder readings (first-order, per reading)."""
 
+RANGEFINDER_NAMES = {o: f"rangefinder {o}" for o in range(8)}
+"""The rangefinder failsafes' names (made once: the checks run every step)."""
 GCS_ACTIONS = {"continue": Action.NONE, "hold": Action.HOLD, "rtl": Action.RTL}
 FENCE_ACTIONS = {"hold": Action.HOLD, "rtl": Action.RTL}
 
@@ -206,18 +208,21 @@ class Failsafes:
         required = self.required_rangefinders()
         watched = self.used_rangefinders | required
         ages = {o: math.inf for o in watched} | {o: a for o, a in inputs.range_ages_s.items() if o in watched}
-        for orientation in sorted(set(self._ranges) - set(ages)):  # no longer watched
+        for orientation in sorted(self._ranges.keys() - ages.keys()):  # no longer watched
             if self._ranges.pop(orientation).active:
                 events.append(FailsafeEvent(f"FS rangefinder {orientation} cleared", Severity.INFO))
         for orientation in sorted(ages):
-            rf = self._ranges.setdefault(orientation, _Latch())
+            rf = self._ranges.get(orientation)
+            if rf is None:
+                rf = self._ranges[orientation] = _Latch()
+            name = RANGEFINDER_NAMES.get(orientation) or f"rangefinder {orientation}"
             silent = ages[orientation] > p.rangefinder_timeout_s
             if orientation in required:
-                check(rf, f"rangefinder {orientation}", silent, Action.HOLD, "silent, hold")
+                check(rf, name, silent, Action.HOLD, "silent, hold")
             else:
-                check(rf, f"rangefinder {orientation}", silent, Action.NONE, "silent, side blocked")
+                check(rf, name, silent, Action.NONE, "silent, side blocked")
         blocked = frozenset(o for o, rf in self._ranges.items() if rf.active)
-        degraded = any(rf.active and o not in required for o, rf in self._ranges.items())
+        degraded = any(o not in required for o in blocked)
         limit = p.degraded_speed_mps if degraded else None
         interval_s = self._range_intervals(inputs.range_times_s, blocked)
         if interval_s is not None:

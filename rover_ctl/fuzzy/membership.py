@@ -114,7 +114,15 @@ class Variable:
         if wrapped < 0.0:
             wrapped += self.period
         low, high = wrapped - self.period, wrapped + self.period
-        return [max(s.membership_one(low), s.membership_one(wrapped), s.membership_one(high)) for s in self.sets]
+        memberships = []
+        for fuzzy_set in self.sets:
+            a, _, _, d = fuzzy_set.points
+            # The copies a period away are 0 (x < a, x > d) unless the set reaches below 0
+            # (low < 0) or to the period (high >= period): computed only then.
+            mu_low = fuzzy_set.membership_one(low) if a < 0.0 else 0.0
+            mu_high = fuzzy_set.membership_one(high) if d >= self.period else 0.0
+            memberships.append(max(mu_low, fuzzy_set.membership_one(wrapped), mu_high))
+        return memberships
 
     def _probes(self) -> np.ndarray:
         """Every breakpoint, the middle between neighbouring ones and a point beyond each end

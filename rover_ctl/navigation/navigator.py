@@ -81,6 +81,7 @@ class Navigator:
         for variable in self.rulebase.inputs:
             if variable.name.startswith("obstacle_"):
                 self._obstacles.append((variable.name, SIDES[variable.name.removeprefix("obstacle_")], variable.unit == "m"))
+        self._orientations = tuple(orientation for _, orientation, _ in self._obstacles)
         self._full_scale = max(abs(s.peak) for name in OUTPUTS for s in self.rulebase.outputs[self.rulebase.output_names.index(name)].sets)
         self.rangefinders: RangefinderPlan | None = None
         """How the rover's rangefinders feed the obstacle inputs (None: as passed)."""
@@ -96,7 +97,7 @@ class Navigator:
     @property
     def orientations(self) -> list[int]:
         """Rangefinder orientations this rule base reads."""
-        return [orientation for _, orientation, _ in self._obstacles]
+        return list(self._orientations)
 
     def step(
         self,
@@ -120,7 +121,7 @@ class Navigator:
         distance_m = steer_m if target_distance_m is None else max(target_distance_m, 0.0)
         inputs = {"target_distance": distance_m, "target_direction": math.degrees(relative_rad) % 360.0}
         if self.rangefinders is not None:
-            ranges_m = self.rangefinders.inputs(ranges_m, self.orientations)
+            ranges_m = self.rangefinders.inputs(ranges_m, self._orientations)
         for name, orientation, in_metres in self._obstacles:
             range_m = ranges_m.get(orientation, math.nan)
             if range_m is None or math.isnan(range_m):

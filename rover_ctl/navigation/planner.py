@@ -57,6 +57,7 @@ API:
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 from dataclasses import dataclass, field
@@ -154,17 +155,22 @@ class Path:
     points: tuple[EN, ...]
     error: str | None = None
     _cumulative_m: np.ndarray = field(init=False, repr=False, compare=False)
-    _segments: tuple[np.ndarray, ...] = field(init=False, repr=False, compare=False)
-    """(start points, direction vectors, lengths, squared lengths) of the segments, for ``project``
-    at every control step."""
+    _cumulative: list[float] = field(init=False, repr=False, compare=False)
+    _segments: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
+    """Per segment: start east, north, direction east, north, length, squared length, arc length
+    at its start and at its end; for ``project`` at every control step."""
 
     def __post_init__(self) -> None:
         pts = np.asarray(self.points, dtype=float).reshape(-1, 2)
         steps = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
         cum = np.concatenate([[0.0], np.cumsum(steps)])
         object.__setattr__(self, "_cumulative_m", cum)
-        seg_len = np.diff(cum)
-        object.__setattr__(self, "_segments", (pts[:-1], np.diff(pts, axis=0), seg_len, seg_len**2))
+        # Plain floats from here on: a path has a few segments, too few for numpy's per-call cost
+        # to pay at every step. Computed with numpy once, so ``project`` sees the same numbers.
+        object.__setattr__(self, "_cumulative", cum.tolist())
+        seg_len, d = np.diff(cum), np.diff(pts, axis=0)
+        columns = (pts[:-1, 0], pts[:-1, 1], d[:, 0], d[:, 1], seg_len, seg_len**2, cum[:-1], cum[1:])
+        object.__setattr__(self, "_segments", tuple(zip(*(c.tolist() for c in columns))))
 
     @property
     def ok(self) -> bool:
@@ -172,13 +178,13 @@ class Path:
 
     @property
     def length_m(self) -> float:
-        return float(self._cumulative_m[-1]) if self.points else 0.0
+        return self._cumulative[-1] if self.points else 0.0
 
     def point_at(self, s_m: float) -> EN:
         """The point at arc length ``s_m`` (clamped to the path)."""
-        cum = self._cumulative_m
-        s = min(max(s_m, 0.0), float(cum[-1]))
-        i = min(int(np.searchsorted(cum, s, side="right")) - 1, len(self.points) - 2)
+        cum = self._cumulative
+        s = min(max(s_m, 0.0), cum[-1])
+        i = min(bisect.bisect_right(cum, s) - 1, len(self.points) - 2)
         if i < 0:
             return self.points[0]
         seg = cum[i + 1] - cum[i]
@@ -191,21 +197,25 @@ class Path:
         signed cross-track error (positive when ``point_en`` is left of the path direction)."""
         if len(self.points) < 2:
             return 0.0, math.dist(point_en, self.points[0]) if self.points else 0.0
-        a, d, seg_len, seg_len2 = self._segments
-        cum = self._cumulative_m
-        p = np.asarray(point_en, dtype=float)
-        t = np.divide(((p - a) * d).sum(axis=1), seg_len2, out=np.zeros_like(seg_len), where=seg_len > 0)
-        lo, hi = np.maximum(cum[:-1], s_min_m), np.minimum(cum[1:], s_max_m)
-        s = np.clip(cum[:-1] + t * seg_len, lo, np.maximum(lo, hi))
-        f = np.divide(s - cum[:-1], seg_len, out=np.zeros_like(seg_len), where=seg_len > 0)
-        nearest = a + f[:, None] * d
-        dist = np.where(lo <= hi, np.hypot(*(p - nearest).T), np.inf)
-        i = int(np.argmin(dist))
-        if not np.isfinite(dist[i]):  # window beyond the path: the end
+        px, py = float(point_en[0]), float(point_en[1])
+        best_m, found = math.inf, None
+        for ax, ay, dx, dy, length, length2, s0, s1 in self._segments:
+            lo, hi = max(s0, s_min_m), min(s1, s_max_m)
+            if lo > hi:
+                continue  # the window misses this segment
+            t = ((px - ax) * dx + (py - ay) * dy) / length2 if length2 > 0 else 0.0
+            s = min(max(s0 + t * length, lo), hi)
+            f = (s - s0) / length if length > 0 else 0.0
+            nx, ny = ax + f * dx, ay + f * dy
+            # abs(complex) is C's hypot, as numpy's: math.hypot rounds differently now and then.
+            distance_m = abs(complex(px - nx, py - ny))
+            if distance_m < best_m:  # the first of equals, as argmin
+                best_m = distance_m
+                # Sign from the segment's direction: cross(d, p - nearest) > 0 means left.
+                found = (s, math.copysign(distance_m, dx * (py - ny) - dy * (px - nx)))
+        if found is None:  # window beyond the path: the end
             return self.length_m, math.dist(point_en, self.points[-1])
-        # Sign from the segment's direction: cross(d, p - nearest) > 0 means left.
-        cross = d[i, 0] * (p[1] - nearest[i, 1]) - d[i, 1] * (p[0] - nearest[i, 0])
-        return float(s[i]), float(math.copysign(dist[i], cross))
+        return found
 
     def carrot(self, point_en: EN, lookahead_m: float) -> EN:
         """Pure-pursuit target: ``lookahead_m`` along the path beyond the projection of ``point_en``."""
@@ -495,6 +505,8 @@ class Planner:
 
     def expire(self, now_s: float) -> bool:
         """Forget blocked circles older than ``blocked_ttl_s``; True if any went."""
+        if not self._blocked:  # the usual case, at every control step
+            return False
         kept = [(t, c) for t, c in self._blocked if now_s - t < self.params.blocked_ttl_s]
         if len(kept) == len(self._blocked):
             return False

@@ -36,6 +36,8 @@ from rover_ctl.navigation.tracks import ObstacleTracker
 
 ORIENTATION_RAD = {o: -math.radians(45.0 * o) for o in range(8)}
 """MAV_SENSOR_ORIENTATION yaw steps (45 deg clockwise each) as body angles (counter-clockwise positive)."""
+_EDGE = {o: (float(np.sign(round(math.cos(b), 6))), float(np.sign(round(math.sin(b), 6)))) for o, b in ORIENTATION_RAD.items()}
+"""Per orientation, which edge of the footprint the sensor sits on: (forward, left) signs."""
 
 
 class ObstacleMemory:
@@ -55,16 +57,23 @@ class ObstacleMemory:
         self._length_m = footprint_length_m if callable(footprint_length_m) else (lambda: footprint_length_m)
         self._width_m = footprint_width_m if callable(footprint_width_m) else (lambda: footprint_width_m)
         self._points = np.empty((0, 4))  # rows: time_s, east_m, north_m, track ident
+        self._added: list[tuple[float, float, float, int]] = []  # rows for _points, joined once per ``ranges``
         self.tracker = ObstacleTracker(params)
         self._tracking = tracking
 
-    def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
-        """(east_m, north_m, axis_rad) of a sensor on the footprint's edge, in ENU."""
-        body = ORIENTATION_RAD[orientation % 8]
-        forward = self._length_m() / 2.0 * np.sign(round(math.cos(body), 6))
-        left = self._width_m() / 2.0 * np.sign(round(math.sin(body), 6))
+    def _sensor_poses(self, orientations, east_m: float, north_m: float, heading_rad: float) -> list[tuple[float, float, float]]:
+        """(east_m, north_m, axis_rad) in ENU of each sensor, on the footprint's edge."""
+        half_length, half_width = self._length_m() / 2.0, self._width_m() / 2.0
         c, s = math.cos(heading_rad), math.sin(heading_rad)
-        return east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + body
+        poses = []
+        for orientation in orientations:
+            forward_sign, left_sign = _EDGE[orientation % 8]
+            forward, left = half_length * forward_sign, half_width * left_sign
+            poses.append((east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + ORIENTATION_RAD[orientation % 8]))
+        return poses
+
+    def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
+        return self._sensor_poses((orientation,), east_m, north_m, heading_rad)[0]
 
     def sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
         """(east_m, north_m, axis_rad) in ENU of the sensor of ``orientation`` on a rover at this pose."""
@@ -79,7 +88,7 @@ class ObstacleMemory:
         east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
         tracked = self.params.horizon_s > 0.0 or self._tracking()
         ident = self.tracker.add(time_s, east, north) if tracked else 0  # no cost when off
-        self._points = np.vstack((self._points, (time_s, east, north, ident)))
+        self._added.append((time_s, east, north, ident))
         return ident
 
     def ranges(self, time_s: float, east_m: float, north_m: float, heading_rad: float, latest_m: dict[int, float],
@@ -87,22 +96,27 @@ class ObstacleMemory:
         """``latest_m`` with each sensor's range shortened to the nearest remembered echo in its
         sector (and predicted path, see the module docstring; ``speed_mps`` is the rover's
         forward speed, which tells echoes sliding along a surface beside it from moving obstacles)."""
-        self._points = self._points[self._points[:, 0] > time_s - self.params.memory_s]
+        if self._added:
+            self._points = np.vstack((self._points, self._added))
+            self._added = []
+        self._points = self._points.compress(self._points[:, 0] > time_s - self.params.memory_s, axis=0)
         points = self._points[:, 1:3]
         if self.params.horizon_s > 0.0:
             points = self._predicted(time_s, (speed_mps * math.cos(heading_rad), speed_mps * math.sin(heading_rad)))
-        if not len(points):
+        if not len(points) or not latest_m:
             return dict(latest_m)
+        # Every sensor at once, a row each: numpy's cost is per call, and the points are few.
+        sensors = [(e, n, math.cos(axis), math.sin(axis))  # math's: numpy's vectorised ones may round differently
+                   for e, n, axis in self._sensor_poses(latest_m, east_m, north_m, heading_rad)]  # fmt: skip
+        e, n, cos_axis, sin_axis = np.array(sensors).T[:, :, None]
+        d_east, d_north = points[:, 0] - e, points[:, 1] - n
+        distance = np.hypot(d_east, d_north)
+        along = d_east * cos_axis + d_north * sin_axis
+        inside = along >= math.cos(math.radians(self.params.sector_half_deg)) * distance  # within sector_half_deg of the axis
+        nearest = np.where(inside, distance, math.inf).min(axis=1).tolist()
         out = {}
-        sector_cos = math.cos(math.radians(self.params.sector_half_deg))
-        for orientation, range_m in latest_m.items():
-            e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
-            d_east, d_north = points[:, 0] - e, points[:, 1] - n
-            distance = np.hypot(d_east, d_north)
-            along = d_east * math.cos(axis) + d_north * math.sin(axis)
-            inside = along >= sector_cos * distance  # within sector_half_deg of the axis
-            nearest = float(distance[inside].min()) if inside.any() else math.inf
-            out[orientation] = min(range_m, nearest) if range_m is not None and not math.isnan(range_m) else range_m
+        for (orientation, range_m), nearest_m in zip(latest_m.items(), nearest):
+            out[orientation] = min(range_m, nearest_m) if range_m is not None and not math.isnan(range_m) else range_m
         return out
 
     def _predicted(self, time_s: float, rover_velocity_en: tuple[float, float]) -> np.ndarray:

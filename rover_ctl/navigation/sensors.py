@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, Sequence
 
 ORIENTATION_NAMES = {0: "front", 1: "front_right", 2: "right", 3: "back_right", 4: "back", 5: "back_left", 6: "left", 7: "front_left"}
 """MAV_SENSOR_ORIENTATION yaw steps (45 deg clockwise each) as the rule bases name them."""
@@ -49,7 +49,7 @@ class RangefinderPlan:
     substitutes: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
     """Rule-base orientation -> the present ones whose nearest reading stands for it."""
 
-    def inputs(self, ranges_m: Mapping[int, float], wanted: list[int]) -> dict[int, float]:
+    def inputs(self, ranges_m: Mapping[int, float], wanted: Sequence[int]) -> dict[int, float]:
         """The range for each orientation in ``wanted`` the rule base reads, from ``ranges_m``
         (present sensors, possibly with blocked sides removed: those stay missing, i.e. blocked)."""
         if not self.avoidance:

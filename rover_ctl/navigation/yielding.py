@@ -101,6 +101,8 @@ class Yielder:
             self._yielding.clear()
             return YieldDecision(None)
         live = {t.ident: t for t in tracks}
+        if not live and not self._yielding:  # nothing moving, nothing waited for: the usual step
+            return YieldDecision(None)
         self._yielding = {i: live.get(i, t) for i, t in self._yielding.items()
                           if i in live or (i not in alive and time_s - t.time_s <= p.max_wait_s)}  # fmt: skip
         candidates = {**{i: t for i, t in self._yielding.items() if i not in live}, **live}  # lost ones move on as last seen
