@@ -133,6 +133,6 @@ if __name__ == "__main__":
     record = record_run(Path(sys.argv[2]), sys.argv[3] if len(sys.argv) == 4 else "")
     record["machine"] = f"{platform.machine()} python {platform.python_version()}"
     record["date"] = time.strftime("%Y-%m-%d")
-    record["wall_s"] = record["result"]["search_wall_s"] + record["result"]["holdout_wall_s"]
+    record["wall_s"] = round(record["result"]["search_wall_s"] + record["result"]["holdout_wall_s"], 1)
     (RESULTS / "tune_run.json").write_text(json.dumps(record, indent=2, default=float) + "\n")
     write_doc()
