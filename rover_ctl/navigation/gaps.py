@@ -60,14 +60,48 @@ before it.
 1. *line up*: turn in place to face ``P0`` (or away from it and reverse, whichever turns less),
    drive to it, turn in place to face the gap's axis and wait until the gyro says the turn has
    stopped (the rover coasts on several degrees after a turn in place: ``SETTLED_DPS``); turned
-   past the tolerance, it turns back;
-2. *look*: the front beam must now see through: every front reading for ``look_s`` free up to
-   the wall line plus ``depth_m`` (from ``P0`` the front cone is 0.2 m wide at the wall), and
-   the front-left and front-right beams must read alike within ``ALIGN_TOL_M`` (square to a flat
-   wall: the axis estimate is good to about 4 degrees); otherwise the gap is given up;
+   past the tolerance, it turns back. Why not trust this line-up: dead reckoning after the turns
+   plus the sweep's error put the rover 0.12-0.13 m off the centre line (more than the 0.1 m
+   margin) about once in 13 lockstep SITL runs, and it then drove into the post and pushed on for
+   20 s (narrow_gap world 8);
+2. *look*: for ``look_s`` the front diagonals are read. *Square*: a flat wall seen by the
+   front-left and front-right cones (axis 45 degrees off the nose, half-angle ``b``, from the nose's
+   corners ``w`` = half the footprint's width either side, the nose ``x`` from the wall) gives
+   ``ln(r_left / r_right) = 2 t (tan(45 - b) + w / x)`` for a heading ``t`` counter-clockwise
+   of the wall's normal; ``|t|`` beyond ``SQUARE_MAX_DEG``: given up (not square); beyond
+   ``heading_tol_deg``: the gap's axis is turned about its centre onto the normal so measured
+   (the sweep's wall line was 4-6 degrees off in some emulator worlds) and the rover turns to it.
+   *Scan* (``scan_max_deg``; 0: none): the rover turns in place at ``scan_rate_dps``, left until
+   the front beam, having been free (no echo to the wall's line plus ``depth_m``), echoes again,
+   then right likewise. From the line-up point the front cone is free only while it lies wholly
+   inside the opening, so its free headings are an interval ``[psi_r, psi_l]`` about the bearing
+   of the opening's centre: to first order, with ``R`` the rover's centre to where the edge rays
+   clip the opening's sides (the edge echoes' mean range ``d`` plus half the footprint's length:
+   the rover turns about its centre), the centre lies ``y = R tan((psi_l + psi_r) / 2)`` left of
+   the rover and the opening is ``R (psi_l - psi_r) + 2 d tan(b)`` wide (0.58-0.62 m measured of
+   0.6 m, in the kinematic world and in the emulator). Each edge is taken while turning
+   outwards, so a lag between a reading and its heading widens the interval but does not move
+   its middle. A width under the footprint plus ``2 side_clearance_m``, or a centre more than
+   ``match_m`` from the sweep's: given up. Otherwise the gap's centre is moved onto the measured
+   one, independent of the dead reckoning since the sweep; the rover is within ``scan_tol_m``
+   of its line: square up and look again; farther: reverse ``RETREAT_M`` behind the line-up point
+   on the measured line, drive forwards to it (the lateral error is closed while moving: a point
+   within ``NEAR_M`` is reached along the heading only) and scan again, at most ``scan_tries``
+   scans. Then the front beam must see through (every front reading while looking) or the gap
+   is given up;
 3. *pass*: pure pursuit on the centre line (target ``lookahead_m`` ahead of the rover's
-   projection) at ``speed_mps``, stopping and giving up if the front beam echoes inside
+   projection) at ``speed_mps``, at half of it from ``SLOW_ZONE_M`` before the wall's line until
+   the nose is ``GUARD_ZONE_M`` past it; stopping and giving up if the front beam echoes inside
    ``stop_m`` (something in the gap); done when the rover's back is ``exit_m`` beyond the line.
+   *Guard*: with the nose within ``GUARD_ZONE_M`` of the line, a front diagonal's mean of its
+   last ``GUARD_READINGS`` readings (each counted as at least ``guard_near_m``: the emulator
+   reports anything nearer as 0.2 m) at ``guard_near_m`` while the other's is ``guard_skew_m``
+   farther: the near front corner is about to meet the post's face (about 0.1 m off the centre
+   line, the other diagonal seeing into the opening: 0.27-0.31 m at 0.12 m off in the emulator);
+   or the wheels driving for ``stall_s`` with the rover less than ``stall_m`` farther along: it
+   is pushing against something (the emulator puts a colliding rover back and stops its wheels).
+   Either: stop, reverse straight (*back*: steering would swing the nose into the post) to
+   ``standoff_m`` before the line, give the gap up and *leave*.
 
 A passage not done within ``timeout_s`` is given up; a gap given up or passed is not taken again
 for ``reject_s`` (found again within ``match_m`` of it). Giving up hands the rover back to the
