@@ -560,6 +560,34 @@ class PassageParams:
     projection on it."""
     stop_m: float = 0.25
     """Passing: a front echo nearer than this (m) stops the rover and gives the gap up."""
+    scan_max_deg: float = 30.0
+    """Looking: the rover turns in place slowly, at most this far (deg) either side of the gap's
+    axis, the front beam scanning the opening: free only while its cone lies wholly inside it, so
+    the middle of the free headings points at the opening's centre, measured from where the rover
+    stands (dead reckoning and the sweep err by 0.1 m and more). 0: no scan (look straight ahead)."""
+    scan_rate_dps: float = 10.0
+    """Looking: the scan's yaw rate (deg/s): 0.5 degrees between two front readings at 20 Hz."""
+    scan_tol_m: float = 0.04
+    """Looking: the scan puts the rover this close (m) to the opening's centre line or it lines up
+    again on the measured line (the margin of a 1.5x gap is 0.1 m a side)."""
+    scan_tries: int = 3
+    """Looking: scans at most (each after a line-up on the last one's line) before the gap is
+    given up; a scan that sees the opening narrower than needed, or its centre more than
+    ``match_m`` from the sweep's, gives it up at once."""
+    guard_near_m: float = 0.21
+    """Passing: a front diagonal's mean over its last three readings, each counted as at least
+    this (m; the emulator's rangefinders report anything nearer as 0.2, their minimum), at this
+    value ..."""
+    guard_skew_m: float = 0.05
+    """... while the other's is at least this much (m) farther, the nose within 0.12 m of the wall's
+    line: the body is off the centre line by about the 0.1 m margin or more (the near corner is
+    about to meet the post's face; the other diagonal sees into the opening): stop, back out
+    straight to ``standoff_m`` and give the gap up."""
+    stall_s: float = 1.0
+    """Passing: driven forwards for this long (s) ..."""
+    stall_m: float = 0.05
+    """... with the wheels moving the rover less than this (m) along the axis: it is pushing against
+    something: stop, back out and give the gap up."""
     exit_m: float = 0.3
     """The passage is over when the rover's back is this far (m) beyond the wall's line."""
     search_m: float = 3.0

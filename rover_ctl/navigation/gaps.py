@@ -60,14 +60,48 @@ before it.
 1. *line up*: turn in place to face ``P0`` (or away from it and reverse, whichever turns less),
    drive to it, turn in place to face the gap's axis and wait until the gyro says the turn has
    stopped (the rover coasts on several degrees after a turn in place: ``SETTLED_DPS``); turned
-   past the tolerance, it turns back;
-2. *look*: the front beam must now see through: every front reading for ``look_s`` free up to
-   the wall line plus ``depth_m`` (from ``P0`` the front cone is 0.2 m wide at the wall), and
-   the front-left and front-right beams must read alike within ``ALIGN_TOL_M`` (square to a flat
-   wall: the axis estimate is good to about 4 degrees); otherwise the gap is given up;
+   past the tolerance, it turns back. Why not trust this line-up: dead reckoning after the turns
+   plus the sweep's error put the rover 0.12-0.13 m off the centre line (more than the 0.1 m
+   margin) about once in 13 lockstep SITL runs, and it then drove into the post and pushed on for
+   20 s (narrow_gap world 8);
+2. *look*: for ``look_s`` the front diagonals are read. *Square*: a flat wall seen by the
+   front-left and front-right cones (axis 45 degrees off the nose, half-angle ``b``, from the nose's
+   corners ``w`` = half the footprint's width either side, the nose ``x`` from the wall) gives
+   ``ln(r_left / r_right) = 2 t (tan(45 - b) + w / x)`` for a heading ``t`` counter-clockwise
+   of the wall's normal; ``|t|`` beyond ``SQUARE_MAX_DEG``: given up (not square); beyond
+   ``heading_tol_deg``: the gap's axis is turned about its centre onto the normal so measured
+   (the sweep's wall line was 4-6 degrees off in some emulator worlds) and the rover turns to it.
+   *Scan* (``scan_max_deg``; 0: none): the rover turns in place at ``scan_rate_dps``, left until
+   the front beam, having been free (no echo to the wall's line plus ``depth_m``), echoes again,
+   then right likewise. From the line-up point the front cone is free only while it lies wholly
+   inside the opening, so its free headings are an interval ``[psi_r, psi_l]`` about the bearing
+   of the opening's centre: to first order, with ``R`` the rover's centre to where the edge rays
+   clip the opening's sides (the edge echoes' mean range ``d`` plus half the footprint's length:
+   the rover turns about its centre), the centre lies ``y = R tan((psi_l + psi_r) / 2)`` left of
+   the rover and the opening is ``R (psi_l - psi_r) + 2 d tan(b)`` wide (0.58-0.62 m measured of
+   0.6 m, in the kinematic world and in the emulator). Each edge is taken while turning
+   outwards, so a lag between a reading and its heading widens the interval but does not move
+   its middle. A width under the footprint plus ``2 side_clearance_m``, or a centre more than
+   ``match_m`` from the sweep's: given up. Otherwise the gap's centre is moved onto the measured
+   one, independent of the dead reckoning since the sweep; the rover is within ``scan_tol_m``
+   of its line: square up and look again; farther: reverse ``RETREAT_M`` behind the line-up point
+   on the measured line, drive forwards to it (the lateral error is closed while moving: a point
+   within ``NEAR_M`` is reached along the heading only) and scan again, at most ``scan_tries``
+   scans. Then the front beam must see through (every front reading while looking) or the gap
+   is given up;
 3. *pass*: pure pursuit on the centre line (target ``lookahead_m`` ahead of the rover's
-   projection) at ``speed_mps``, stopping and giving up if the front beam echoes inside
+   projection) at ``speed_mps``, at half of it from ``SLOW_ZONE_M`` before the wall's line until
+   the nose is ``GUARD_ZONE_M`` past it; stopping and giving up if the front beam echoes inside
    ``stop_m`` (something in the gap); done when the rover's back is ``exit_m`` beyond the line.
+   *Guard*: with the nose within ``GUARD_ZONE_M`` of the line, a front diagonal's mean of its
+   last ``GUARD_READINGS`` readings (each counted as at least ``guard_near_m``: the emulator
+   reports anything nearer as 0.2 m) at ``guard_near_m`` while the other's is ``guard_skew_m``
+   farther: the near front corner is about to meet the post's face (about 0.1 m off the centre
+   line, the other diagonal seeing into the opening: 0.27-0.31 m at 0.12 m off in the emulator);
+   or the wheels driving for ``stall_s`` with the rover less than ``stall_m`` farther along: it
+   is pushing against something (the emulator puts a colliding rover back and stops its wheels).
+   Either: stop, reverse straight (*back*: steering would swing the nose into the post) to
+   ``standoff_m`` before the line, give the gap up and *leave*.
 
 A passage not done within ``timeout_s`` is given up; a gap given up or passed is not taken again
 for ``reject_s`` (found again within ``match_m`` of it). Giving up hands the rover back to the
@@ -102,11 +136,33 @@ WALL_MIN_SPAN_M = 0.6
 wall worth looking along (a small drum is passed in less)."""
 WALL_MAX_RMS_M = 0.08
 """A wall's echoes farther than this (RMS, m) from its fitted line: not one flat wall."""
-ALIGN_TOL_M = 0.12
-"""Lined up square to a flat wall, the front-left and front-right beams read alike: a difference
-beyond this (m) is a heading off the gap's axis by more than about 4 degrees."""
+SQUARE_MAX_DEG = 10.0
+"""Looking: the front diagonals say the rover's heading is off the wall's normal by this much
+(deg) or more: the wall is not flat there, or something stands before it; the gap is given up.
+Less, and more than ``heading_tol_deg``: the gap's axis is turned onto the normal measured (the
+wall line's fit from the sweep was off by 4-6 degrees in narrow_gap worlds 9, 24 and 36)."""
+SQUARINGS = 3
+"""Looking: the gap's axis is turned onto the measured normal at most this many times."""
 DIAGONALS = (7, 1)
 """Front-left and front-right (MAV_SENSOR_ORIENTATION yaw 315 and 45)."""
+RETREAT_M = 0.4
+"""A scan found the rover off the opening's centre line: it reverses to this far (m) behind the
+line-up point on the measured line and drives forwards to it again, closing the lateral error
+while moving (a lateral error under ``NEAR_M`` cannot be closed at the point itself), then scans
+again."""
+GUARD_ZONE_M = 0.12
+"""Passing: the diagonal guard watches while the nose is within this (m) of the wall's line. Off
+the centre line by more than the margin, the front corner meets the post's face as the nose
+reaches the line; from 0.2 m out a heading 4 degrees off the wall's normal, centred, made the
+diagonals differ as much (narrow_gap world 14, in-process)."""
+SLOW_ZONE_M = 0.35
+"""Passing: from this far (m, the nose to the wall's line) until the nose is ``GUARD_ZONE_M``
+past the line, the rover goes at half ``speed_mps``, so that it stops within a few centimetres
+when the guard trips."""
+GUARD_READINGS = 3
+"""Passing: the guard compares the means of each diagonal's last this many readings (0.15 s at
+20 Hz): one reading's noise (0.02 m in the emulator) made a centred rover's diagonals differ by
+0.06 m."""
 HEADING_GAIN_PER_S = 2.5
 """Yaw rate commanded per radian of heading error (rad/s per rad)."""
 DRIVE_MAX_ERROR_RAD = math.radians(15.0)
@@ -277,6 +333,22 @@ def gap_from_sweep(wall: list[Beam], free: list[Beam], before: Beam, after: Beam
     return Gap(centre, (ne, nn), width_low, max(edges[1] - edges[0], width_low))
 
 
+@dataclass
+class _Scan:
+    """A scan of the opening with the front beam: turning one way (+1 left, -1 right) until the
+    beam, free, echoes again; the heading (relative to the gap's axis) and range where it did,
+    for each way."""
+
+    direction: int = 1
+    last_free_rad: float | None = None
+    edges: dict[int, tuple[float, float]] | None = None
+    turns: int = 0
+    any_free: bool = False
+
+    def __post_init__(self) -> None:
+        self.edges = {}
+
+
 @dataclass(frozen=True)
 class Drive:
     """What the passage commands this step: forward speed (m/s, negative: reverse) and yaw rate
@@ -298,6 +370,8 @@ class Passage:
         self._sweeps: dict[int, deque[Beam]] = {o: deque() for o in SIDE_BODY_RAD}
         self._front: list[float] = []
         self._diagonal_m: dict[int, float] = {}
+        self._diagonals: dict[int, deque[float]] = {o: deque(maxlen=GUARD_READINGS) for o in DIAGONALS}
+        self._look_diagonals: dict[int, list[float]] = {o: [] for o in DIAGONALS}  # looking: every reading since it began
         self._rejected: list[tuple[float, EN, bool]] = []  # (until when, centre, a gap proved there)
         self._searched: list[tuple[float, EN, EN]] = []  # walls searched: (until when, a point on it, its normal)
         self._follow: tuple[float, EN, EN, EN, float] | None = None  # (when, point, along, normal, where its echoes began along it)
@@ -318,6 +392,14 @@ class Passage:
         self.state = ""
         self._since_s = 0.0
         self._look_from_s = 0.0
+        self._scan: _Scan | None = None  # scanning: where the front beam's free headings ended
+        self._scan_readings: list[tuple[float, float]] = []  # scanning: (heading, front range) as they came
+        self._scan_ok = False  # the last scan found the rover on the opening's centre line
+        self._retreat = False  # the last scan found it off the line: line up again from RETREAT_M farther back
+        self._squarings = 0  # turns of the gap's axis onto the wall's normal the diagonals measured
+        self._look_front: list[float] = []  # looking: the front readings since it began
+        self._scans = 0  # scans of this gap
+        self._progress: tuple[float, float] | None = None  # passing: (since when, along the axis then) for the stall check
         self.events: list[str] = []
         """What happened (found, passing, through, given up), for the shell to say; the caller clears it."""
 
@@ -335,9 +417,16 @@ class Passage:
         p, odo = self.params, self.odometry
         if orientation == FRONT:
             self._front.append(range_m)
+            if self.state == "look":
+                self._look_front.append(range_m)
+            if self.state == "scan":
+                self._scan_readings.append((odo.heading_rad, range_m))
             return
         if orientation in DIAGONALS:
             self._diagonal_m[orientation] = range_m
+            self._diagonals[orientation].append(range_m)
+            if self.state == "look":
+                self._look_diagonals[orientation].append(range_m)
             return
         if orientation not in SIDE_BODY_RAD:
             return
@@ -464,6 +553,7 @@ class Passage:
 
     def _line_up(self, time_s: float, gap: Gap, along: EN) -> None:
         self.gap, self.state, self._since_s, self._gap_proved = gap, "line_up", time_s, True
+        self._scan_ok, self._retreat, self._scans, self._scan, self._squarings = False, False, 0, None, 0
         self._inspect_along, self._search = along, None
         self.events.append("Narrow passage: lining up")
 
@@ -617,12 +707,21 @@ class Passage:
         axis = math.atan2(gap.axis_en[1], gap.axis_en[0])
         along, _ = gap.coordinates(odo.position_en)
         nose_to_line = -along - self._length_m() / 2.0
+        if self.state == "back":
+            return self._back(time_s, along, axis)
         if self.state == "line_up":
             start = (
                 gap.centre_en[0] - p.standoff_m * gap.axis_en[0],
                 gap.centre_en[1] - p.standoff_m * gap.axis_en[1],
             )
-            drive = self._go_to(start, axis)
+            if self._retreat:  # off the measured line: back along it first, then forwards to P0 on it
+                drive = self._go_to((start[0] - RETREAT_M * gap.axis_en[0], start[1] - RETREAT_M * gap.axis_en[1]), axis)
+                if drive is not None:
+                    return drive
+                self._retreat = False
+            # On the line the last scan measured: only square up (a few centimetres short of P0 or
+            # past it do not matter; a move there could not close a lateral error under NEAR_M).
+            drive = None if self._scan_ok else self._go_to(start, axis)
             if drive is not None:
                 return drive
             error = _wrap(axis - odo.heading_rad)
@@ -630,22 +729,45 @@ class Passage:
                 return self._turn(error)
             if abs(odo.yaw_rate_radps) > math.radians(SETTLED_DPS):
                 return Drive(0.0, 0.0, self.state)  # still coasting round: see where it stops
-            self.state, self._look_from_s = "look", time_s
+            self.state, self._look_from_s, self._look_front = "look", time_s, []
+            for readings in self._look_diagonals.values():
+                readings.clear()
             return Drive(0.0, 0.0, self.state)
+        if self.state == "scan":
+            return self._scanning(time_s, gap, axis, nose_to_line)
         if self.state == "look":
             if abs(_wrap(axis - odo.heading_rad)) > math.radians(p.heading_tol_deg):
                 self.state = "line_up"  # it turned on past the axis: turn back, look again
                 return self._turn(_wrap(axis - odo.heading_rad))
-            if any(r <= nose_to_line + p.depth_m for r in front):
-                self._give_up(time_s, "the front beam does not see through", leave=True)
-                return self._leave(time_s)
             if time_s - self._look_from_s < p.look_s:
                 return Drive(0.0, 0.0, self.state)
-            left, right = (self._diagonal_m.get(o, math.inf) for o in DIAGONALS)
-            if not (math.isfinite(left) and math.isfinite(right)) or abs(left - right) > ALIGN_TOL_M:
+            tilt = self._tilt(nose_to_line)
+            if not math.isfinite(tilt) or abs(tilt) > math.radians(SQUARE_MAX_DEG) or self._squarings > SQUARINGS:
                 self._give_up(time_s, "not square to the wall", leave=True)
                 return self._leave(time_s)
-            self.state = "pass"
+            normal = _wrap(odo.heading_rad - tilt)
+            if abs(_wrap(normal - axis)) > math.radians(p.heading_tol_deg):
+                # The gap's axis (the wall line's normal, from the sweep) is off by more than the
+                # tolerance: turn it about the gap's centre onto the wall's normal measured here.
+                self._squarings += 1
+                self.gap = gap = Gap(gap.centre_en, (math.cos(normal), math.sin(normal)), gap.width_low_m, gap.width_high_m)
+                if self._scan_ok and abs(gap.coordinates(odo.position_en)[1]) > p.scan_tol_m:
+                    self._scan_ok, self._retreat = False, True  # now off the centre line: line up on it again
+                self.state = "line_up"
+                return self._turn(_wrap(normal - odo.heading_rad))
+            if p.scan_max_deg > 0.0 and not self._scan_ok:
+                if self._scans >= p.scan_tries:
+                    self._give_up(time_s, "not on the opening's centre line after scanning it", leave=True)
+                    return self._leave(time_s)
+                self.state, self._scan, self._scan_readings = "scan", _Scan(), []
+                self._scans += 1
+                return Drive(0.0, math.radians(p.scan_rate_dps), self.state)
+            if any(r <= nose_to_line + p.depth_m for r in front) or any(r <= nose_to_line + p.depth_m for r in self._look_front):
+                self._give_up(time_s, "the front beam does not see through", leave=True)
+                return self._leave(time_s)
+            self.state, self._progress = "pass", (time_s, along)
+            for readings in self._diagonals.values():
+                readings.clear()
             self.events.append("Narrow passage: seen through, passing")
         if any(r <= p.stop_m for r in front) or any(r <= nose_to_line + p.depth_m for r in front if nose_to_line > 0.0):
             self._give_up(time_s, "something in the gap")
@@ -654,13 +776,121 @@ class Passage:
             self.events.append("Narrow passage: through")
             self._end(time_s)
             return None
+        why = self._about_to_touch(time_s, along, nose_to_line)
+        if why:
+            self.events.append(f"Narrow passage: backing out ({why})")
+            self.state, self._since_s = "back", time_s
+            return Drive(0.0, 0.0, self.state)
         ahead = along + p.lookahead_m
         target = (
             gap.centre_en[0] + ahead * gap.axis_en[0],
             gap.centre_en[1] + ahead * gap.axis_en[1],
         )
         error = _wrap(math.atan2(target[1] - odo.north_m, target[0] - odo.east_m) - odo.heading_rad)
-        return Drive(p.speed_mps * max(math.cos(error), 0.0), self._rate(error), self.state)
+        speed = p.speed_mps * (0.5 if -GUARD_ZONE_M < nose_to_line <= SLOW_ZONE_M else 1.0)
+        return Drive(speed * max(math.cos(error), 0.0), self._rate(error), self.state)
+
+    def _tilt(self, nose_to_line: float) -> float:
+        """The rover's heading from the wall's normal (rad, counter-clockwise), from the means of
+        the front diagonals' readings while looking (nan without both).
+
+        Each diagonal's cone (axis 45 degrees off the nose, half-angle ``b``) echoes first along
+        its ray nearest the normal, at ``a = 45 - b`` degrees from it when square, from a corner
+        ``w`` (half the footprint's width) beside the nose, ``x`` (the nose) from the wall:
+        ``r = (x -+ w sin t) / cos(a +- t)``, so ``ln(r_left / r_right) = 2 t (tan a + w / x)``
+        to first order."""
+        left, right = (sum(r) / len(r) if r else math.nan for r in (self._look_diagonals[o] for o in DIAGONALS))
+        if not (math.isfinite(left) and math.isfinite(right) and left > 0.0 and right > 0.0):
+            return math.nan
+        a = math.radians(45.0 - self.params.beam_half_deg)
+        return math.log(left / right) / (2.0 * (math.tan(a) + self._width_m() / 2.0 / max(nose_to_line, 0.2)))
+
+    def _about_to_touch(self, time_s: float, along: float, nose_to_line: float) -> str:
+        """Passing: why the body is about to touch (or touches) the opening's edge, or ''.
+
+        With the nose within ``GUARD_ZONE_M`` of the wall's line, a front diagonal at
+        ``guard_near_m`` (readings nearer count as that: the emulator reports 0.2 m for anything
+        nearer) with the other ``guard_skew_m`` farther: off the centre line by about the margin,
+        0.1 m, or more (module docstring; farther out a heading a few degrees off the wall's normal
+        reads the same, past the line the diagonals see round the far corners). The
+        wheels driving for ``stall_s`` and the rover less than ``stall_m`` farther along: pushing
+        against something."""
+        p = self.params
+        left, right = (sum(max(x, p.guard_near_m) for x in r) / len(r) if len(r) == GUARD_READINGS else math.nan
+                       for r in (self._diagonals[o] for o in DIAGONALS))  # fmt: skip
+        near, far = min(left, right), max(left, right)
+        if 0.0 < nose_to_line <= GUARD_ZONE_M and not math.isnan(left + right) and near <= p.guard_near_m and far - near >= p.guard_skew_m:
+            return f"{'front-left' if left < right else 'front-right'} {near:.2f} m, the other {far:.2f} m"
+        assert self._progress is not None
+        since, then = self._progress
+        if along - then >= p.stall_m:
+            self._progress = (time_s, along)
+        elif time_s - since >= p.stall_s:
+            return f"{along - then:.2f} m in {time_s - since:.1f} s"
+        return ""
+
+    def _back(self, time_s: float, along: float, axis: float) -> Drive | None:
+        """Reverse straight (the heading held: steering would swing the nose into the post it is
+        beside) to ``standoff_m`` before the gap's line, then give the gap up and turn back along
+        the wall (``leave``)."""
+        p = self.params
+        if along <= -p.standoff_m or time_s - self._since_s > p.timeout_s:
+            self._give_up(time_s, "about to touch its edge", leave=True)
+            return self._leave(time_s)
+        return Drive(-p.speed_mps, 0.0, self.state)
+
+    def _scanning(self, time_s: float, gap: Gap, axis: float, nose_to_line: float) -> Drive | None:
+        """Turn slowly in place, the front beam scanning the opening (``scan_max_deg``): each edge
+        of the free headings is taken turning outwards (a lag between reading and heading shifts
+        both edges alike, not their middle). Both found: the opening's centre is measured; on its
+        line (``scan_tol_m``), look again and pass; off it, line up again on it."""
+        p, odo = self.params, self.odometry
+        sc = self._scan
+        assert sc is not None and sc.edges is not None
+        limit = math.radians(p.scan_max_deg)
+        readings, self._scan_readings = self._scan_readings, []
+        for heading, range_m in readings:
+            rel = _wrap(heading - axis)
+            if range_m > nose_to_line + p.depth_m:
+                sc.last_free_rad, sc.any_free = rel, True
+            elif sc.last_free_rad is not None and sc.direction * (rel - sc.last_free_rad) > 0.0 and sc.direction not in sc.edges:
+                sc.edges[sc.direction] = ((sc.last_free_rad + rel) / 2.0, range_m)
+                sc.direction, sc.last_free_rad, sc.turns = -sc.direction, None, sc.turns + 1
+        rel = _wrap(odo.heading_rad - axis)
+        if sc.direction in sc.edges or sc.direction * rel >= limit:
+            sc.direction, sc.last_free_rad, sc.turns = -sc.direction, None, sc.turns + 1
+        if len(sc.edges) == 2:
+            return self._scanned(time_s, gap, axis)
+        if sc.turns > 4 or (sc.turns >= 2 and not sc.any_free):
+            self._give_up(time_s, "the front beam's scan found no way through", leave=True)
+            return self._leave(time_s)
+        return Drive(0.0, sc.direction * math.radians(p.scan_rate_dps), self.state)
+
+    def _scanned(self, time_s: float, gap: Gap, axis: float) -> Drive | None:
+        """Both edges of the free headings found: the opening's width and centre from them
+        (module docstring), the gap moved onto the measured centre line."""
+        p, odo = self.params, self.odometry
+        assert self._scan is not None and self._scan.edges is not None
+        (left, left_m), (right, right_m) = self._scan.edges[1], self._scan.edges[-1]
+        sensor_m = (left_m + right_m) / 2.0  # the front sensor to where the cone's edge rays clip the opening's sides
+        reach = sensor_m + self._length_m() / 2.0  # the same from the rover's centre (the turn's centre)
+        width = reach * (left - right) + 2.0 * sensor_m * math.tan(math.radians(p.beam_half_deg))
+        offset = reach * math.tan((left + right) / 2.0)  # the opening's centre, left of the rover
+        along, lateral = gap.coordinates(odo.position_en)
+        shift = lateral + offset  # the measured centre, left of the sweep's
+        self._scan = None
+        self.events.append(f"Narrow passage scanned: {width:.2f} m wide, {offset:+.2f} m to its centre ({shift:+.2f} m from the sweep's)")
+        if left <= right or width < self._needed_m() or abs(shift) > p.match_m:
+            self._give_up(time_s, "the front beam's scan does not agree", leave=True)
+            return self._leave(time_s)
+        ue, un = gap.axis_en
+        self.gap = Gap((gap.centre_en[0] - shift * un, gap.centre_en[1] + shift * ue), gap.axis_en, gap.width_low_m, gap.width_high_m)
+        self._scan_ok = abs(offset) <= p.scan_tol_m
+        if not self._scan_ok:
+            self._retreat = True
+            self._since_s = time_s  # a line-up again: the timeout counts from it (scan_tries bounds them)
+        self.state = "line_up"  # back square to the axis (and onto the measured line if off it), then look
+        return self._manoeuvre(time_s, [])
 
     def _rate(self, error_rad: float) -> float:
         limit = math.radians(self.params.turn_rate_dps)

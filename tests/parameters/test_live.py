@@ -286,7 +286,8 @@ def mission_for_planner(d: Daemon) -> None:
 def ex_passage(d: Daemon) -> list:
     """A 1.5x-width gap beside the rover (tests/proximity/gap_world.py) driven past with the
     autopilot's passage, if on; then with it on: passed, the same gap again (rejected), a gap
-    0.3 m along (another one unless ``match_m`` says otherwise), and something in the way."""
+    0.3 m along (another one unless ``match_m`` says otherwise), something in the way, and a gap
+    the sweep placed 0.12 m off (the front beam's scan, the guard)."""
     from proximity.gap_world import drive_past_gap
 
     from rover_ctl.navigation.gaps import Odometry
@@ -302,6 +303,12 @@ def ex_passage(d: Daemon) -> list:
     enabled, d.config.passage.enabled = d.config.passage.enabled, True
     passage.reset()
     trace += run(t0_s=1000.0) + run(t0_s=1030.0) + run(t0_s=1060.0, gap_x=1.3) + run(t0_s=2000.0, behind_m=0.9)
+    passage.reset()
+    trace += run(t0_s=3000.0, side_lead_m=0.12, blocking=True)  # lined up 0.12 m off the centre line: scanned, lined up again
+    scan, d.config.passage.scan_max_deg = d.config.passage.scan_max_deg, 0.0
+    passage.reset()
+    trace += run(t0_s=4000.0, side_lead_m=0.12, blocking=True)  # the same not scanned: the guard backs out
+    d.config.passage.scan_max_deg = scan
     d.config.passage.enabled = enabled
     return trace
 

@@ -7,7 +7,10 @@ stand-in for the rule base drives along the wall at ``cruise_mps``; once through
 the goal. The passage gets what the autopilot gives it: wheel distances, the gyro's yaw rate
 (NED), readings, and the pose (here the truth, or the truth plus a drifting offset). With
 ``yaw_lag_s`` the rover turns at its commanded yaw rate only after a first-order lag, so that it
-coasts on after a turn in place is stopped, as the emulator's skid-steer rover does."""
+coasts on after a turn in place is stopped, as the emulator's skid-steer rover does. With
+``blocking`` a step that would bring the footprint into contact with a wall, or deeper into it,
+does not happen (the rover and its wheels stay put, as the emulator puts a colliding rover back
+and stops its wheels); each new contact counts in ``Run.contacts``."""
 
 from __future__ import annotations
 
@@ -40,6 +43,10 @@ class Run:
     events: list[str] = field(default_factory=list)
     min_clearance_m: float = math.inf
     """Least distance from the footprint to an obstacle while the passage drove."""
+    contacts: int = 0
+    """Steps the passage drove into contact that began one (``blocking``)."""
+    blocked_steps: int = 0
+    """Steps the passage drove into a wall (``blocking``): pushing against it."""
 
     def crossing_x(self, wall_y: float) -> float | None:
         """Where the rover's centre crossed the wall's near face."""
@@ -76,11 +83,21 @@ def _ray(ox: float, oy: float, angle: float, boxes) -> float:
     return best
 
 
+def _footprint(x: float, y: float, h: float) -> Polygon:
+    c, s = math.cos(h), math.sin(h)
+    return Polygon([(x + a * c - b * s, y + a * s + b * c) for a, b in ((LENGTH / 2, WIDTH / 2), (LENGTH / 2, -WIDTH / 2),
+                                                                         (-LENGTH / 2, -WIDTH / 2), (-LENGTH / 2, WIDTH / 2))])  # fmt: skip
+
+
 def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 0.6, wall_y: float = 3.0,
                    start: tuple[float, float, float] = (-2.0, 1.9, 0.0), cruise_mps: float = 0.5, t0_s: float = 0.0,
                    duration_s: float = 40.0, behind_m: float | None = None, passage: Passage | None = None,
-                   pose_drift_mps: float = 0.0, seed: int = 0, yaw_lag_s: float = 0.0) -> tuple[Run, Passage]:  # fmt: skip
-    """Drive the scene; ``pose_drift_mps``: the pose given as 'fused' drifts from the truth this fast."""
+                   pose_drift_mps: float = 0.0, seed: int = 0, yaw_lag_s: float = 0.0,
+                   blocking: bool = False, side_lead_m: float = 0.0) -> tuple[Run, Passage]:  # fmt: skip
+    """Drive the scene; ``pose_drift_mps``: the pose given as 'fused' drifts from the truth this
+    fast; ``side_lead_m``: the side rangefinders read from this far ahead of where they are (as
+    if the pose they are placed with lagged the reading), so that the gap a sweep finds is off
+    its true place along the wall by about as much."""
     rng, drift_rng = np.random.default_rng(seed), np.random.default_rng(seed + 1)
     passage = passage or Passage(params, lambda: LENGTH, lambda: WIDTH)
     boxes = _walls(gap_x, gap_m, wall_y, behind_m)
@@ -91,10 +108,12 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
     run, dt, through = Run(), 0.04, False
     drift = np.zeros(2)
     yaw_rate = 0.0
+    touching = False
     for k in range(int(duration_s / dt)):
         t = t0_s + k * dt
         passage.odometry.on_wheels(left, right)
         for o, (fwd, lat, body) in SENSORS.items():
+            fwd = fwd + (side_lead_m if o in (2, 6) else 0.0)
             sx, sy = (
                 x + fwd * math.cos(h) - lat * math.sin(h),
                 y + fwd * math.sin(h) + lat * math.cos(h),
@@ -117,15 +136,22 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
         passage.events.clear()
         yaw_rate = w if yaw_lag_s <= 0.0 else yaw_rate + (w - yaw_rate) * min(1.0, dt / yaw_lag_s)
         w = yaw_rate
+        nx, ny, nh = x + v * math.cos(h) * dt, y + v * math.sin(h) * dt, h + w * dt
+        if blocking and drive is not None and any(_footprint(nx, ny, nh).intersection(w_).area > _footprint(x, y, h).intersection(w_).area + 1e-12
+                                                  or _footprint(nx, ny, nh).distance(w_) < 1e-9 < _footprint(x, y, h).distance(w_) for w_ in shapes):  # fmt: skip
+            run.contacts += not touching
+            run.blocked_steps += 1
+            touching = True
+            passage.odometry.on_gyro(t, 0.0)
+            run.path.append((x, y, h))
+            continue
+        touching = False
         passage.odometry.on_gyro(t, -w)
-        x, y, h = x + v * math.cos(h) * dt, y + v * math.sin(h) * dt, h + w * dt
+        x, y, h = nx, ny, nh
         left, right = left + (v - w * TRACK / 2) * dt, right + (v + w * TRACK / 2) * dt
         run.path.append((x, y, h))
-        c, s = math.cos(h), math.sin(h)
-        corners = [(x + a * c - b * s, y + a * s + b * c) for a, b in ((LENGTH / 2, WIDTH / 2), (LENGTH / 2, -WIDTH / 2),
-                                                                         (-LENGTH / 2, -WIDTH / 2), (-LENGTH / 2, WIDTH / 2))]  # fmt: skip
         if drive is not None:  # the stand-in driver's own contacts are not the passage's
-            body_shape = Polygon(corners)
+            body_shape = _footprint(x, y, h)
             run.min_clearance_m = min(run.min_clearance_m, *(body_shape.distance(w_) for w_ in shapes))
         if y > wall_y + 3.0:
             break

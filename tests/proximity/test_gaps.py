@@ -157,7 +157,7 @@ def test_given_up_square_to_the_opening_the_rover_turns_back_along_the_wall(monk
     SITL run, narrow_gap world 5): so the passage first turns back the way the rover was going."""
     from rover_ctl.navigation import gaps
 
-    monkeypatch.setattr(gaps, "ALIGN_TOL_M", -1.0)  # no diagonal pair is ever alike: never square
+    monkeypatch.setattr(gaps, "SQUARE_MAX_DEG", -1.0)  # never square enough
     run, _ = drive_past_gap(PARAMS)
     assert "Narrow passage: given up (not square to the wall)" in run.events
     states = [s for s, *_ in run.trace]
@@ -198,3 +198,82 @@ def test_a_rover_that_coasts_on_after_turning_in_place_looks_only_once_settled()
     assert "Narrow passage: given up (not square to the wall)" not in run.events
     assert run.crossing_x(WALL_Y) == pytest.approx(1.0, abs=0.05)
     assert run.min_clearance_m > 0.05
+
+
+def _sweep_off(monkeypatch, lateral_m: float = 0.0, axis_deg: float = 0.0):
+    """The sweep's gap placed ``lateral_m`` along the wall from where it is and its axis turned by
+    ``axis_deg``: as dead reckoning after the line-up's turns and the sweep's own error put the
+    rover 0.12-0.13 m off the centre line in lockstep SITL (narrow_gap world 8)."""
+    from rover_ctl.navigation import gaps
+
+    true_sweep = gaps.gap_from_sweep
+
+    def off(*args, **kwargs):
+        gap = true_sweep(*args, **kwargs)
+        if gap is None:
+            return None
+        ue, un = gap.axis_en
+        turn = math.atan2(un, ue) + math.radians(axis_deg)
+        centre = (gap.centre_en[0] + lateral_m * un, gap.centre_en[1] - lateral_m * ue)  # to the right of the axis
+        return gaps.Gap(centre, (math.cos(turn), math.sin(turn)), gap.width_low_m, gap.width_high_m)
+
+    monkeypatch.setattr(gaps, "gap_from_sweep", off)
+
+
+@pytest.mark.parametrize("lateral_m", [0.12, -0.12, 0.2])
+def test_a_rover_lined_up_off_the_centre_line_scans_the_opening_and_goes_through_on_it(monkeypatch, lateral_m):
+    """More than the 0.1 m margin off the centre line the body meets the post (before the front
+    beam's scan, these runs touched it); the scan measures the centre from where the rover stands."""
+    _sweep_off(monkeypatch, lateral_m)
+    run, _ = drive_past_gap(PARAMS, blocking=True)
+    assert any(e.startswith("Narrow passage scanned") for e in run.events)
+    assert run.contacts == 0 and run.min_clearance_m > 0.05
+    assert run.crossing_x(WALL_Y) == pytest.approx(1.0, abs=0.04)
+    assert run.events[-1] == "Narrow passage: through"
+
+
+def test_the_scan_measures_the_opening_s_centre_and_width():
+    run, _ = drive_past_gap(PARAMS)
+    scanned = next(e for e in run.events if e.startswith("Narrow passage scanned"))
+    width = float(scanned.split(": ")[1].split(" m wide")[0])
+    assert width == pytest.approx(0.6, abs=0.04)
+
+
+def test_an_axis_off_the_wall_s_normal_is_squared_by_the_diagonals(monkeypatch):
+    """The wall line's fit put the gap's axis 4-6 degrees off the wall's normal (narrow_gap
+    worlds 9, 24, 36): the scan then reads that tilt as an offset and the gap was given up, not
+    square. The diagonals measure the tilt and the axis is turned onto the normal."""
+    _sweep_off(monkeypatch, axis_deg=6.0)
+    run, _ = drive_past_gap(PARAMS, blocking=True)
+    assert "Narrow passage: given up (not square to the wall)" not in run.events
+    assert run.contacts == 0 and run.min_clearance_m > 0.05
+    assert run.crossing_x(WALL_Y) == pytest.approx(1.0, abs=0.04)
+
+
+@pytest.mark.parametrize(("lateral_m", "near"), [(0.11, "front-right"), (-0.12, "front-left")])
+def test_about_to_touch_the_edge_the_rover_backs_out_and_gives_up(monkeypatch, lateral_m, near):
+    """Without the scan, more than the margin off the centre line: the diagonal on the near side
+    reads its nearest while the other sees into the opening; the rover stops short, backs out
+    straight and hands back, never touching (before the guard, it drove into the post)."""
+    _sweep_off(monkeypatch, lateral_m)
+    run, _ = drive_past_gap(replace(PARAMS, scan_max_deg=0.0), blocking=True)
+    assert any(e.startswith(f"Narrow passage: backing out ({near}") for e in run.events)
+    assert "Narrow passage: given up (about to touch its edge)" in run.events
+    assert run.contacts == 0 and run.min_clearance_m > 0.0
+    assert run.crossing_x(WALL_Y) is None
+    states = [s for s, *_ in run.trace]
+    assert states.index("back") > states.index("pass") and "pass" not in states[states.index("back"):]
+
+
+def test_pushing_against_the_edge_stops_at_once_and_backs_out(monkeypatch):
+    """The last guard: driving with the rover not getting on (the emulator put it back at each
+    contact, and the passage pushed on for 20 s in lockstep SITL, world 8). One contact, then
+    back out and give up."""
+    _sweep_off(monkeypatch, 0.11)
+    params = replace(PARAMS, scan_max_deg=0.0, guard_skew_m=10.0)  # no scan, no diagonal guard
+    run, _ = drive_past_gap(params, blocking=True)
+    assert run.contacts == 1
+    assert run.blocked_steps * 0.04 <= params.stall_s + 0.2
+    assert any(e.startswith("Narrow passage: backing out (") and " m in " in e for e in run.events)
+    assert "Narrow passage: given up (about to touch its edge)" in run.events
+    assert run.crossing_x(WALL_Y) is None
