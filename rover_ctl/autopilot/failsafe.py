@@ -67,8 +67,6 @@ class Action(enum.IntEnum):
 RANGE_INTERVAL_GAIN = 0.2
 """Smoothing of the measured interval between rangefinder readings (first-order, per reading)."""
 
-RANGEFINDER_NAMES = {o: f"rangefinder {o}" for o in range(8)}
-"""The rangefinder failsafes' names (made once: the checks run every step)."""
 GCS_ACTIONS = {"continue": Action.NONE, "hold": Action.HOLD, "rtl": Action.RTL}
 FENCE_ACTIONS = {"hold": Action.HOLD, "rtl": Action.RTL}
 
@@ -215,7 +213,7 @@ class Failsafes:
             rf = self._ranges.get(orientation)
             if rf is None:
                 rf = self._ranges[orientation] = _Latch()
-            name = RANGEFINDER_NAMES.get(orientation) or f"rangefinder {orientation}"
+            name = f"rangefinder {orientation}"
             silent = ages[orientation] > p.rangefinder_timeout_s
             if orientation in required:
                 check(rf, name, silent, Action.HOLD, "silent, hold")

@@ -118,7 +118,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -341,12 +341,9 @@ class _Scan:
 
     direction: int = 1
     last_free_rad: float | None = None
-    edges: dict[int, tuple[float, float]] | None = None
+    edges: dict[int, tuple[float, float]] = field(default_factory=dict)
     turns: int = 0
     any_free: bool = False
-
-    def __post_init__(self) -> None:
-        self.edges = {}
 
 
 @dataclass(frozen=True)
@@ -846,7 +843,7 @@ class Passage:
         line (``scan_tol_m``), look again and pass; off it, line up again on it."""
         p, odo = self.params, self.odometry
         sc = self._scan
-        assert sc is not None and sc.edges is not None
+        assert sc is not None
         limit = math.radians(p.scan_max_deg)
         readings, self._scan_readings = self._scan_readings, []
         for heading, range_m in readings:
@@ -870,7 +867,7 @@ class Passage:
         """Both edges of the free headings found: the opening's width and centre from them
         (module docstring), the gap moved onto the measured centre line."""
         p, odo = self.params, self.odometry
-        assert self._scan is not None and self._scan.edges is not None
+        assert self._scan is not None
         (left, left_m), (right, right_m) = self._scan.edges[1], self._scan.edges[-1]
         sensor_m = (left_m + right_m) / 2.0  # the front sensor to where the cone's edge rays clip the opening's sides
         reach = sensor_m + self._length_m() / 2.0  # the same from the rover's centre (the turn's centre)

@@ -72,19 +72,16 @@ class ObstacleMemory:
             poses.append((east_m + forward * c - left * s, north_m + forward * s + left * c, heading_rad + ORIENTATION_RAD[orientation % 8]))
         return poses
 
-    def _sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
-        return self._sensor_poses((orientation,), east_m, north_m, heading_rad)[0]
-
     def sensor_pose(self, orientation: int, east_m: float, north_m: float, heading_rad: float) -> tuple[float, float, float]:
         """(east_m, north_m, axis_rad) in ENU of the sensor of ``orientation`` on a rover at this pose."""
-        return self._sensor_pose(orientation, east_m, north_m, heading_rad)
+        return self._sensor_poses((orientation,), east_m, north_m, heading_rad)[0]
 
     def add(self, time_s: float, east_m: float, north_m: float, heading_rad: float, orientation: int, range_m: float) -> int:
         """Remember the echo of one reading taken with the rover at this pose (inf: no echo);
         returns the ident of the track the echo joined (0: none, or not tracking)."""
         if not math.isfinite(range_m) or range_m < 0.0:
             return 0
-        e, n, axis = self._sensor_pose(orientation, east_m, north_m, heading_rad)
+        e, n, axis = self.sensor_pose(orientation, east_m, north_m, heading_rad)
         east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
         tracked = self.params.horizon_s > 0.0 or self._tracking()
         ident = self.tracker.add(time_s, east, north) if tracked else 0  # no cost when off
