@@ -1,6 +1,6 @@
 """A 50 m GPS glitch held for 30 s while the daemon drives a mission, emulator in the loop (three
 processes, lockstep): the fault is the emulator's SIM_GPS_GLITCH_X set over the wire mid-leg. The
-rover must stay on its path (truth), reach no waypoint it is not at, and the estimate must be back
+rover must stay on its path (truth, beyond the GPS bias it follows), reach no waypoint it is not at, and the estimate must be back
 to its normal error within 10 s of the glitch's end."""
 
 from __future__ import annotations
@@ -69,12 +69,17 @@ def test_fifty_metre_glitch_for_thirty_seconds_keeps_the_rover_on_its_path(tmp_p
     bias_en = _series([r["t_s"] for r in fixes], [(r["err_bias_e_m"], r["err_bias_n_m"]) for r in fixes])
     events = read_jsonl(out / "events.jsonl")
 
-    # On its path: the truth's distance from the path the daemon was following (its last plan).
+    # On its path: the truth's distance from the path the daemon was following (its last plan),
+    # beyond the GPS bias at that moment, which the estimate follows and so the rover with it (the
+    # false-reach check below allows it too). The bias wanders by a metre and more: with the
+    # truth's bare distance the limit failed a run whose truth was 2.19 m off while the glitch was
+    # rejected. A glitch let in would put the rover tens of metres off.
     plans = [(e["t_s"], LineString(e["path_en"])) for e in events if e["type"] == "plan"]
     window = [s for s in states if start_s <= s["t_s"] <= end_s + RECOVERY_S]
-    cross_track_m = max(
-        [line for t0, line in plans if t0 <= s["t_s"]][-1].distance(Point(truth_en(s["t_s"]))) for s in window
-    )
+    off_path = [([line for t0, line in plans if t0 <= s["t_s"]][-1].distance(Point(truth_en(s["t_s"]))), float(np.hypot(*bias_en(s["t_s"]))))
+                for s in window]  # fmt: skip
+    truth_off_m = max(d for d, _ in off_path)
+    cross_track_m = max(d - bias for d, bias in off_path)
 
     # No waypoint reached falsely: at each MISSION_ITEM_REACHED the truth is within the radius
     # (plus what the GPS bias, which the estimate follows, may add).
@@ -92,7 +97,7 @@ def test_fifty_metre_glitch_for_thirty_seconds_keeps_the_rover_on_its_path(tmp_p
     normal_m = max(e for t, e in error if start_s - 20.0 <= t < start_s)
     during_m = max(e for t, e in error if start_s <= t <= end_s)
     after_m = max(e for t, e in error if end_s + RECOVERY_S <= t <= end_s + RECOVERY_S + 20.0)
-    print(f"glitch {start_s:.1f}-{end_s:.1f} s: cross-track {cross_track_m:.2f} m, error before {normal_m:.2f} m, "
+    print(f"glitch {start_s:.1f}-{end_s:.1f} s: cross-track {truth_off_m:.2f} m, beyond the GPS bias {cross_track_m:.2f} m, error before {normal_m:.2f} m, "
           f"during {during_m:.2f} m, from +{RECOVERY_S:g} s {after_m:.2f} m; reached {reached}")  # fmt: skip
     assert cross_track_m < CROSS_TRACK_LIMIT_M
     assert not false_reach
