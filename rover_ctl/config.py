@@ -515,6 +515,72 @@ class YieldParams:
 
 
 @dataclass
+class EvadeParams:
+    """Stepping aside for oncoming traffic (``rover_ctl.navigation.evasion``): the heading and speed,
+    found by rolling the rover out, that keep a walker coming head-on beyond the rover's half-width
+    plus ``margin_m``."""
+
+    enabled: bool = True
+    """Step aside from oncoming obstacles (needs their tracks: the obstacle memory builds them while this is on)."""
+    horizon_s: float = 3.0
+    """How far ahead the rollouts look (s): two walkers closing at 2.2 m/s meet within the
+    rangefinders' 4 m in under 2 s."""
+    margin_m: float = 0.9
+    """Clearance kept between the rover's side and the track's point, the obstacle's near surface
+    (m): the largest walker's radius (0.5 m) and 0.4 m, as far as an echo placed on a 15-degree beam's axis 3 m out may be from where it came."""
+    release_margin_m: float = 0.2
+    """The manoeuvre ends once going straight along the course clears the track by this much more (m)."""
+    min_hits: int = 6
+    """A track is stepped aside from only after this many echoes (0.3 s of one rangefinder at 20 Hz)."""
+    max_speed_sd_mps: float = 0.35
+    """...and only while its velocity's standard deviation is at most this (m/s, either axis)."""
+    min_travel_m: float = 0.45
+    """...and only once it has gone this far from its first echo (m): a drum crossing the front
+    beam gives echoes that come at the rover by up to its radius as its face passes (0.45: 0.5 s of a walker
+    at 0.9 m/s; in the in-process runner, 0.35 instead struck one more crossing world in 100)."""
+    min_closing_mps: float = 0.2
+    """...and only when it comes towards the rover along its course at least this fast (m/s)."""
+    max_cross_deg: float = 45.0
+    """...and only when its course is within this of the rover's line (deg): a crosser is yielded to."""
+    max_heading_off_deg: float = 30.0
+    """No manoeuvre starts while the rover points more than this off its course (deg): turning, its
+    tracks' velocities are unreliable."""
+    min_start_speed_mps: float = 0.6
+    """...nor while it goes slower than this (m/s): slowed or stopped, it is yielding or at close
+    quarters, where the rule base drives."""
+    min_start_range_m: float = 1.5
+    """...nor for a track nearer ahead than this (m): no room is left to step aside."""
+    max_velocity_jump_mps: float = 0.4
+    """During the manoeuvre a live estimate replaces the latched one only while its velocity is
+    within this of it (m/s): the turning rover's beams slide over the walker."""
+    side_free_m: float = 1.0
+    """A side whose 45-degree rangefinder reads nearer than this is not stepped to (m)."""
+    max_s: float = 6.0
+    """Longest manoeuvre (s)."""
+    max_delta_deg: float = 90.0
+    """Largest heading offset from the course tried (deg)..."""
+    delta_step_deg: float = 15.0
+    """...in steps of this (deg): 15, 30, ... 90."""
+    slow_fraction: float = 0.5
+    """Each heading is tried at the speed given, then at this fraction of it."""
+    heading_gain: float = 3.0
+    """Yaw rate commanded per radian of heading error (1/s), up to ``max_yaw_rate_radps``."""
+    max_yaw_rate_radps: float = 1.5
+    """Largest yaw rate commanded (rad/s): the wheels' 200 rpm leave about 1.6 rad/s at 1.2 m/s."""
+    accel_mps2: float = 1.0
+    """Speed change per second the rollouts assume (m/s^2)."""
+    rollout_step_s: float = 0.1
+    """Time step of the rollouts (s)."""
+
+    @property
+    def deltas_deg(self) -> list[float]:
+        """The heading offsets tried, smallest first."""
+        step = max(self.delta_step_deg, 1.0)
+        count = max(1, int(self.max_delta_deg / step + 1e-9))  # at least one, whatever the two are set to
+        return [min(step * k, self.max_delta_deg) for k in range(1, count + 1)]
+
+
+@dataclass
 class PassageParams:
     """Narrow passages (``rover_ctl.navigation.gaps``): an opening barely wider than the rover,
     seen through by a side rangefinder as the rover follows a wall, lined up on and driven through."""
@@ -677,6 +743,7 @@ class Config:
     navigator: NavigatorParams = field(default_factory=NavigatorParams)
     proximity: ProximityParams = field(default_factory=ProximityParams)
     yielding: YieldParams = field(default_factory=YieldParams)
+    evasion: EvadeParams = field(default_factory=EvadeParams)
     passage: PassageParams = field(default_factory=PassageParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
     obstacle_map: ObstacleMapParams = field(default_factory=ObstacleMapParams)

@@ -6,7 +6,7 @@ has one: WP_RADIUS, WP_SPEED, RTL_SPEED, FS_GCS_TIMEOUT, FS_ACTION, FENCE_ACTION
 WENC_RADIUS, SCHED_LOOP_RATE; otherwise one prefix per section: ``RBT_`` robot, ``LINK_`` vehicle
 link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
 ``WHL_`` wheel control, ``DMN_`` control loop, ``GCS_`` ground-station link, ``NAV_`` navigator,
-``PRX_`` obstacle memory, ``YLD_`` yielding, ``OMAP_`` persistent obstacles, ``GAP_`` narrow
+``PRX_`` obstacle memory, ``YLD_`` yielding, ``EVD_`` evasion, ``OMAP_`` persistent obstacles, ``GAP_`` narrow
 passages, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The default is the
 dataclass default and the description is the field's docstring in config.py, so neither is
 written twice.
@@ -388,6 +388,28 @@ _DECLARED: tuple[tuple, ...] = (
     ("yielding.max_heading_off_deg", "YLD_MAX_HDG_OFF", 0.0, 180.0, RW, {"units": "deg"}),
     ("yielding.max_wait_s", "YLD_MAX_WAIT", 0.0, 120.0, RW, {}),
     ("yielding.speed_steps", "YLD_SPD_STEPS", 1, 20, RW, {}),
+    ("evasion.enabled", "EVD_ENABLE", 0, 1, RW, {}),
+    ("evasion.horizon_s", "EVD_HORIZON", 0.1, 30.0, RW, {}),
+    ("evasion.margin_m", "EVD_MARGIN", 0.0, 10.0, RW, {}),
+    ("evasion.release_margin_m", "EVD_RELEASE", 0.0, 10.0, RW, {}),
+    ("evasion.min_hits", "EVD_MIN_HITS", 1, 1000, RW, {}),
+    ("evasion.max_speed_sd_mps", "EVD_MAX_VEL_SD", 0.01, 10.0, RW, {}),
+    ("evasion.min_travel_m", "EVD_MIN_TRAVEL", 0.0, 100.0, RW, {}),
+    ("evasion.min_closing_mps", "EVD_MIN_CLOSING", 0.0, 10.0, RW, {}),
+    ("evasion.max_cross_deg", "EVD_MAX_ANGLE", 0.0, 90.0, RW, {"units": "deg"}),
+    ("evasion.max_heading_off_deg", "EVD_MAX_HDG_OFF", 0.0, 180.0, RW, {"units": "deg"}),
+    ("evasion.min_start_speed_mps", "EVD_MIN_SPEED", 0.0, 10.0, RW, {}),
+    ("evasion.min_start_range_m", "EVD_MIN_RANGE", 0.0, 10.0, RW, {}),
+    ("evasion.max_velocity_jump_mps", "EVD_MAX_VEL_JMP", 0.0, 10.0, RW, {}),
+    ("evasion.side_free_m", "EVD_SIDE_FREE", 0.0, 10.0, RW, {}),
+    ("evasion.max_s", "EVD_MAX_TIME", 0.1, 120.0, RW, {}),
+    ("evasion.max_delta_deg", "EVD_MAX_DELTA", 1.0, 180.0, RW, {"units": "deg"}),
+    ("evasion.delta_step_deg", "EVD_DELTA_STEP", 1.0, 90.0, RW, {"units": "deg"}),
+    ("evasion.slow_fraction", "EVD_SLOW", 0.0, 1.0, RW, {}),
+    ("evasion.heading_gain", "EVD_HDG_GAIN", 0.1, 100.0, RW, {}),
+    ("evasion.max_yaw_rate_radps", "EVD_MAX_YAW_RATE", 0.1, 20.0, RW, {}),
+    ("evasion.accel_mps2", "EVD_ACCEL", 0.01, 100.0, RW, {"units": "m/s/s"}),
+    ("evasion.rollout_step_s", "EVD_ROLLOUT_DT", 0.01, 1.0, RW, {}),
     ("obstacle_map.enabled", "OMAP_ENABLE", 0, 1, RW, {}),
     ("obstacle_map.cell_m", "OMAP_CELL", 0.05, 5.0, RW, {}),
     ("obstacle_map.miss_score", "OMAP_MISS", 0.0, 100.0, RW, {}),

@@ -58,6 +58,7 @@ from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.yielding import Yielder
+from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
@@ -70,7 +71,7 @@ LOG_COLUMNS = (
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
-    "map_obstacles",
+    "map_obstacles", "evade_track",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 _EMPTY_ROW = dict.fromkeys(LOG_COLUMNS, "")
@@ -156,8 +157,9 @@ class Autopilot:
         self.loop_rate = LoopRate(config.daemon)
         self._loop: LoopRateState | None = None
         self.proximity = ObstacleMemory(config.proximity, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m,
-                                        tracking=lambda: config.yielding.enabled)  # fmt: skip
+                                        tracking=lambda: config.yielding.enabled or config.evasion.enabled)  # fmt: skip
         self.yielder = Yielder(config.yielding, lambda: math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0)
+        self.evader = Evader(config.evasion, lambda: robot.footprint_width_m / 2.0)
         self.obstacle_map = ObstacleMap(config.obstacle_map)
         self._map_updated_s = self._map_handed_s = -math.inf
         self._map_obstacles: tuple = ()  # the persistent obstacles handed to the planner
@@ -550,16 +552,30 @@ class Autopilot:
         if self._loop is not None and self._loop.speed_limit_mps is not None:  # slow loop: bounded travel per step
             speed_mps = min(speed_mps, self._loop.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
-        if self.config.yielding.enabled:  # crossing traffic: slow or stop on the path and let it pass
+        course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
+        if self.config.yielding.enabled or self.config.evasion.enabled:
             rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
             tracks = self.proximity.tracker.moving(t_s, rover_velocity)
-            course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
+        yielding = False
+        if self.config.yielding.enabled:  # crossing traffic: slow or stop on the path and let it pass
             alive = {track.ident for track in self.proximity.tracker.tracks}
             yielded = self.yielder.limit(pose.east_m, pose.north_m, course, speed_mps, tracks, t_s, alive, pose.heading_rad)
-            if yielded.speed_limit_mps is not None:
-                speed_mps = yielded.speed_limit_mps
-                self._map_moving.add(yielded.track_ident)  # crossing traffic: never a persistent obstacle
-                row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
+            yielding = yielded.speed_limit_mps is not None
+        if self.config.evasion.enabled:  # oncoming traffic: step aside, the navigator waits
+            evade = self.evader.step(t_s, pose.east_m, pose.north_m, pose.heading_rad, pose.speed_mps, course, speed_mps, tracks, ranges,
+                                     may_start=not yielding)  # fmt: skip
+            if evade is not None:
+                self._commanded_speed_mps = evade.speed_mps
+                turn_mps = evade.yaw_rate_radps * self.config.robot.track_m / 2.0
+                left, right = self._speed_to_rpm(evade.speed_mps - turn_mps), self._speed_to_rpm(evade.speed_mps + turn_mps)
+                row.update(evade_track=evade.track_ident, left_set_rpm=left, right_set_rpm=right)
+                return self.wheels.step(t_s, dt_s, left, right)
+        else:
+            self.evader.reset()
+        if yielding:
+            speed_mps = yielded.speed_limit_mps
+            self._map_moving.add(yielded.track_ident)  # crossing traffic: never a persistent obstacle
+            row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip
         self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
@@ -627,6 +643,7 @@ class Autopilot:
         if self.follower is not None:
             self.follower.reset()
         self.passage.reset()
+        self.evader.reset()
         self.wheels.reset()
         if previous != mode:
             self._outbox.append(ModeChanged(mode, previous, reason))

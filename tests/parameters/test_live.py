@@ -231,6 +231,34 @@ def ex_yield_switch(d: Daemon) -> list:
     return [len(memory.tracker.tracks), ex_yielding(d)[:60]]
 
 
+def ex_evasion(d: Daemon) -> list:
+    """The rover drives north at 1.2 m/s (as the evader lets it) towards walkers coming head-on at
+    several offsets and speeds: one whose velocity swings sideways mid-manoeuvre, one with the
+    right diagonal blocked, one met while slow, one at the edge of the track's maturity."""
+    from rover_ctl.navigation.tracks import Track
+
+    evader, trace = d.autopilot.evader, []
+    cases = ((0.0, -0.9, 0, 0.0, 1.2, 20, 0.0), (0.3, -0.5, 0, 0.0, 1.2, 7, 0.1), (-0.2, -0.7, 1, 0.0, 1.2, 20, 0.0),
+             (0.0, -0.8, 0, 0.6, 1.2, 20, 0.0), (0.1, -0.3, 0, 0.0, 0.7, 6, 0.1), (0.0, -1.0, 0, 0.0, 1.2, 20, 0.13),
+             (0.6, -0.6, 0, 0.0, 1.2, 20, 0.0), (0.0, -0.25, 0, 0.0, 1.2, 20, 0.0))  # fmt: skip
+    for offset, vn, swing, blocked_right, speed0, hits, vv in cases:
+        evader.reset()
+        x, y, psi, v = 0.0, 0.0, math.pi / 2 + 0.3 * offset, speed0
+        for k in range(120):
+            t = k * 0.05
+            we, wn = offset + (0.3 * vn if offset > 0.5 else 0.0) * t, 4.5 + vn * t
+            v_east = (0.3 * vn if offset > 0.5 else 0.0) + (-0.7 if swing and evader.active else 0.0)
+            tracks = [Track(1, t, we, wn, v_east, vn, vv=vv, hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
+            course = math.atan2(30.0 - y, -x)
+            out = evader.step(t, x, y, psi, v, course, 1.2, tracks, {1: 4.0 - blocked_right * 5, 7: 4.0}, may_start=k % 40 != 3)
+            speed, omega = (1.2, 3.0 * math.remainder(course - psi, math.tau)) if out is None else (out.speed_mps, out.yaw_rate_radps)
+            psi += omega * 0.05
+            v += max(-0.05, min(0.05, speed - v))
+            x, y = x + v * math.cos(psi) * 0.05, y + v * math.sin(psi) * 0.05
+            trace.append(None if out is None else (round(out.speed_mps, 9), round(out.yaw_rate_radps, 9)))
+    return trace
+
+
 def mapping(d: Daemon) -> None:
     """A mission ahead, and the persistent-obstacle map on (whatever the default)."""
     mission_ahead(d)
@@ -463,6 +491,7 @@ EXERCISES = {
                                    "link.radio_status_timeout_s")),
     "yielding": (no_mission, ex_yielding, ("yielding.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "yield_switch": (no_mission, ex_yield_switch, ("yielding.enabled",)),
+    "evasion": (no_mission, ex_evasion, ("evasion.", "robot.footprint_width_m")),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
     "obstacle_map": (mapping, ex_obstacle_map, tuple(f"obstacle_map.{f.name}" for f in dataclasses.fields(ObstacleMapParams) if f.name != "enabled")),
     "map_switch": (mission_ahead, ex_map_switch, ("obstacle_map.enabled",)),

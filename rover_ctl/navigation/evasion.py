@@ -1,0 +1,206 @@
+"""Stepping aside for oncoming traffic: the heading and speed that let a walker coming head-on pass.
+
+Pure: no clock, no I/O. The autopilot asks ``Evader.step`` every control step with the moving
+obstacle tracks (``rover_ctl.navigation.tracks``); while it answers a ``Drive`` that drives the
+wheels, the fuzzy navigator waits (as for a narrow passage, ``rover_ctl.navigation.gaps``).
+
+**Why.** Yielding (``rover_ctl.navigation.yielding``) chooses only the speed along the path, which
+is right for crossing traffic and wrong for a walker coming down the rover's line: a stopped rover
+is walked into. The rule base reacts to where an obstacle *is*, and only once it is near: against
+a walker closing at up to 2.2 m/s it starts turning about 2 m out, always to the same side, slows
+to half speed as it turns, and is struck on its flank with its turn half done (the commonest
+collision of the ``head_on`` benchmark). A walker has to be stepped aside from early and briskly,
+to the side it is not on.
+
+**Method: velocity obstacles by rollout** (after Fiorini and Shiller, 1998, with the rover's turn
+rate in the model). An oncoming track at ``q`` with velocity ``w`` is taken to go on at ``w``. For
+each candidate heading ``psi_c = course + side * delta`` (``delta`` in ``deltas_deg``, ``side`` +1
+left or -1 right) and speed ``s`` (the speed given, then ``slow_fraction`` of it), the rover is
+rolled out from its pose over ``horizon_s`` in steps of ``rollout_step_s`` with the law the drive
+uses::
+
+    omega = clip(heading_gain * wrap(psi_c - psi), +-max_yaw_rate_radps)
+    psi  += omega dt;   v += clip(s - v, +-accel_mps2 dt);   p += v (cos psi, sin psi) dt
+
+and its clearance is ``min_k |p_k - (q + w t_k)|``. The track is an echo on the obstacle's near
+surface, so the clearance needed, ``R = robot half-width + margin_m``, carries the obstacle's own
+size in ``margin_m``. The first candidate, in order of growing ``delta`` and the faster speed
+first, whose clearance is at least ``R`` wins; when none is, the one with the largest clearance.
+The side is away from the track: the sign of ``-(u x r)``, ``u`` the course's unit vector and
+``r = q - p`` (right when the track is dead ahead, as road users keep right); it is chosen when the
+manoeuvre starts and kept to its end, so that the rover does not weave.
+
+**Which tracks.** Confirmed moving tracks with at least ``min_hits`` echoes, a velocity standard
+deviation of at most ``max_speed_sd_mps`` and ``min_travel_m`` travelled from the first echo (a
+drum crossing the narrow front beam at first looks exactly like a walker coming down it: its echo,
+placed on the beam's axis, comes at the rover as its face passes, by up to its radius), ahead of the rover (``r . u >= min_start_range_m``: nearer,
+there is no room left to step aside, and the rule base is better at close quarters), coming towards it
+along its line (``w . u <= -min_closing_mps``, and ``|w x u| < sin(max_cross_deg) |w|``: a crosser
+is the yielder's), which the rover going on along ``u`` at its speed would pass closer than ``R``
+within ``horizon_s``. None starts while the rover points more than ``max_heading_off_deg`` off its
+course (its beams then sweep over surfaces and give tracks velocities that are not there), goes
+slower than ``min_start_speed_mps`` or yields to crossing traffic (a crosser passing in front of a
+slowed rover gives echoes that seem to come at it).
+
+**While evading** the track's estimate is latched when the manoeuvre starts and moved on at its
+velocity; a live estimate replaces it only while its velocity stays within ``max_velocity_jump_mps``
+of the one latched at the start (a turning rover's beams slide over the walker and corrupt its velocity). A side
+whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to. The manoeuvre ends
+when the obstacle is behind the rover (``r . h < 0``, ``h`` its heading, and separating), when
+going straight along the course clears it by ``release_margin_m`` more than ``R``, or after
+``max_s``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable, Mapping
+
+from rover_ctl.config import EvadeParams
+from rover_ctl.navigation.tracks import Track
+from rover_ctl.navigation.yielding import closest_approach_m
+
+FRONT_LEFT, FRONT_RIGHT = 7, 1
+"""MAV_SENSOR_ROTATION of the 45-degree rangefinders (``mav.MAV_SENSOR_ROTATION_YAW_315``/``_45``)."""
+
+
+@dataclass(frozen=True)
+class Drive:
+    """What the evasion commands this step: forward speed (m/s) and yaw rate (rad/s, CCW)."""
+
+    speed_mps: float
+    yaw_rate_radps: float
+    track_ident: int
+
+
+def _latch(track: Track) -> Track:
+    return Track(track.ident, track.time_s, track.east_m, track.north_m, track.v_east_mps, track.v_north_mps)
+
+
+class Evader:
+    """Steps aside from walkers coming head-on (see the module docstring)."""
+
+    def __init__(self, params: EvadeParams, half_width_m) -> None:
+        """``params`` is read at every call; ``half_width_m`` is a function giving the value in force."""
+        self.params = params
+        self._half_width_m = half_width_m
+        self._track: Track | None = None
+        self._side = 0.0
+        self._started_s = 0.0
+        self._v0 = (0.0, 0.0)
+        """The latched track's velocity when the manoeuvre started."""
+
+    @property
+    def active(self) -> bool:
+        return self._track is not None
+
+    def reset(self) -> None:
+        self._track = None
+
+    def step(self, time_s: float, east_m: float, north_m: float, heading_rad: float, speed_now_mps: float,
+             course_rad: float, speed_mps: float, tracks: Iterable[Track],
+             ranges: Mapping[int, float] | None = None, may_start: bool = True) -> Drive | None:  # fmt: skip
+        """The drive for this step, or None to let the navigator drive. The rover is at
+        (``east_m``, ``north_m``) pointing ``heading_rad`` at ``speed_now_mps``; ``course_rad`` is
+        towards its target and ``speed_mps`` the speed it may go; ``tracks`` the moving tracks;
+        ``ranges`` the obstacle memory's range per rangefinder orientation (m). ``may_start``: a
+        manoeuvre may start (not while the rover yields to crossing traffic: a crosser passing in
+        front of a stopped rover gives echoes that seem to come at it)."""
+        p = self.params
+        if not p.enabled or speed_mps <= 0.0:
+            self._track = None
+            return None
+        live = {t.ident: t for t in tracks}
+        radius_m = self._half_width_m() + p.margin_m
+        ue, un = math.cos(course_rad), math.sin(course_rad)
+        if self._track is None:
+            if not may_start:
+                return None
+            self._track = self._threat(time_s, east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, live.values(), radius_m)
+            if self._track is None:
+                return None
+            e, n = self._track.position_at(time_s)
+            ahead_left = ue * (n - north_m) - un * (e - east_m)  # u x r: > 0 when the track is left of the course
+            self._side = -1.0 if ahead_left >= 0.0 else 1.0
+            self._started_s = time_s
+            self._v0 = (self._track.v_east_mps, self._track.v_north_mps)
+        else:
+            self._refresh(live.get(self._track.ident))
+        track = self._track
+        e, n = track.position_at(time_s)
+        re, rn = e - east_m, n - north_m
+        behind = re * math.cos(heading_rad) + rn * math.sin(heading_rad) < 0.0 and re * track.v_east_mps + rn * track.v_north_mps > 0.0
+        straight_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
+        if behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s:
+            self._track = None
+            return None
+        side = self._side
+        if ranges is not None and ranges.get(FRONT_LEFT if side > 0 else FRONT_RIGHT, 0.0) < p.side_free_m:
+            if ranges.get(FRONT_RIGHT if side > 0 else FRONT_LEFT, 0.0) >= p.side_free_m:  # a silent one is not free
+                side = self._side = -side
+        target_rad, speed = self._choose(east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m)
+        omega = max(-p.max_yaw_rate_radps, min(p.max_yaw_rate_radps, p.heading_gain * math.remainder(target_rad - heading_rad, math.tau)))
+        return Drive(speed, omega, track.ident)
+
+    def _threat(self, time_s, east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, tracks, radius_m) -> Track | None:
+        """The oncoming track that going on along the course would pass nearest, if nearer than ``radius_m``."""
+        p = self.params
+        if abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(p.max_heading_off_deg) or speed_now_mps < p.min_start_speed_mps:
+            return None
+        ue, un = math.cos(course_rad), math.sin(course_rad)
+        max_share = math.sin(math.radians(p.max_cross_deg))
+        best, best_m = None, radius_m
+        for track in tracks:
+            e, n = track.position_at(time_s)
+            re, rn = e - east_m, n - north_m
+            along = track.v_east_mps * ue + track.v_north_mps * un
+            across = abs(track.v_north_mps * ue - track.v_east_mps * un)
+            if (track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m or re * ue + rn * un < p.min_start_range_m
+                    or along > -p.min_closing_mps or across >= max_share * track.speed_mps):  # fmt: skip
+                continue
+            miss_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
+            if miss_m < best_m:
+                best, best_m = track, miss_m
+        return None if best is None else _latch(best)
+
+    def _refresh(self, live: Track | None) -> None:
+        """A live estimate replaces the latched one while its velocity agrees with the one latched
+        at the start (not the last one: a velocity creeping off step by step would pass)."""
+        if live is None:
+            return
+        if math.hypot(live.v_east_mps - self._v0[0], live.v_north_mps - self._v0[1]) <= self.params.max_velocity_jump_mps:
+            self._track = _latch(live)
+
+    def _choose(self, east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m):
+        """(heading, speed): the first candidate that clears ``radius_m``, else the clearest."""
+        p = self.params
+        best, best_m = None, -math.inf
+        for delta_deg in p.deltas_deg:
+            target_rad = course_rad + side * math.radians(delta_deg)
+            for speed in (speed_mps, speed_mps * p.slow_fraction):
+                clear_m = self._rollout(east_m, north_m, heading_rad, speed_now_mps, target_rad, speed, e, n,
+                                        track.v_east_mps, track.v_north_mps)  # fmt: skip
+                if clear_m >= radius_m:
+                    return target_rad, speed
+                if clear_m > best_m:
+                    best, best_m = (target_rad, speed), clear_m
+        return best
+
+    def _rollout(self, x, y, psi, v, target_rad, speed, qe, qn, we, wn) -> float:
+        """Smallest distance (m) between the rover driven by the drive's law towards ``target_rad``
+        at ``speed`` and the track, over the horizon (module docstring)."""
+        p = self.params
+        dt = p.rollout_step_s
+        dv = p.accel_mps2 * dt
+        nearest = math.hypot(qe - x, qn - y)
+        for _ in range(max(1, round(p.horizon_s / dt))):
+            omega = max(-p.max_yaw_rate_radps, min(p.max_yaw_rate_radps, p.heading_gain * math.remainder(target_rad - psi, math.tau)))
+            psi += omega * dt
+            v += max(-dv, min(dv, speed - v))
+            x += v * math.cos(psi) * dt
+            y += v * math.sin(psi) * dt
+            qe += we * dt
+            qn += wn * dt
+            nearest = min(nearest, math.hypot(qe - x, qn - y))
+        return nearest
