@@ -46,12 +46,14 @@ surfaces and give its tracks velocities that are not there.
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
 full speed clears it by ``release_margin_m`` more, or its course comes within half of
 ``min_cross_deg`` of the line (the maturity tests no longer apply), so that track noise does not
-make the rover lurch. A yielded-to obstacle often loses its track while it passes (its echo jumps
-across its surface from one beam to the next, beyond the tracker's gate, and a new track starts
-with no velocity). So the last estimate of every track yielded to is kept, and while its track is
-gone (not merely no longer moving: that one is static now, and released) it stands in for it,
-moving on at its last velocity, for at most ``max_wait_s``: the rover waits until that obstacle
-has passed, not until it was lost.
+make the rover lurch. The margin only holds a yield that full speed would end: when no speed is
+free it does not count against full speed in the ranking above (it did, and held the rover at a
+slower speed nearer the crosser). A yielded-to obstacle often loses its track while it passes
+(its echo jumps across its surface from one beam to the next, beyond the tracker's gate, and a
+new track starts with no velocity). So the last estimate of every track yielded to is kept, and
+while its track is gone (not merely no longer moving: that one is static now, and released) it
+stands in for it, moving on at its last velocity, for at most ``max_wait_s``: the rover waits
+until that obstacle has passed, not until it was lost.
 """
 
 from __future__ import annotations
@@ -137,15 +139,17 @@ class Yielder:
         best_fraction, best_m = 1.0, -math.inf
         for fraction in (i / steps for i in range(steps, -1, -1)):
             vr_e, vr_n = fraction * speed_mps * ue, fraction * speed_mps * un
-            worst_m = math.inf  # the closest any crossing track comes, less the margin it needs
+            worst_m, free = math.inf, True  # the closest any crossing track comes, less the margin it needs
             for ident, re, rn, velocities in crossing:
-                clear_m = radius_m + (p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0)
+                release_m = p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0
                 for we, wn in velocities:
-                    worst_m = min(worst_m, closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - clear_m)
+                    clear_m = closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - radius_m
+                    worst_m, free = min(worst_m, clear_m), free and clear_m >= release_m
+            if free:
+                best_fraction = fraction
+                break
             if worst_m > best_m + 1e-9:
                 best_fraction, best_m = fraction, worst_m
-            if worst_m >= 0.0:
-                break
         if best_fraction >= 1.0:
             self._yielding = {}
             return YieldDecision(None)

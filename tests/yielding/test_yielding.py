@@ -123,6 +123,17 @@ def test_a_rover_never_stops_in_the_lane_of_a_crosser_whose_echo_slides_forward(
             assert closest > ROBOT_RADIUS_M + 0.2, (start_east, lane)
 
 
+def test_when_no_speed_is_free_the_release_margin_does_not_rank_them():
+    """A crosser yielded to, level with the rover 1.5 m to its right: no speed is free, and full
+    speed keeps it farthest (1.15 m, 75 % 1.0 m). The release margin holds a yield until full speed
+    clears the crosser by that much more; it does not count against full speed among speeds that
+    are all in conflict (it did, and held the rover at 75 %, nearer the crosser)."""
+    level = Track(1, 0.0, 1.5, 0.0, -1.0, 0.0, hits=20, born_en=(4.5, 0.0))
+    y = yielder()
+    assert y.limit(0.0, -1.0, NORTH, 1.2, [level], 0.0).speed_limit_mps == 0.0  # 1 m further back it stops for it
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [level], 0.0).speed_limit_mps is None
+
+
 def test_unsure_tracks_are_not_yielded_to():
     """Few echoes, or a velocity still uncertain: no yield (a sliding echo makes such tracks)."""
     young = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=3)
