@@ -18,10 +18,16 @@ Their separation ``d(tau) = (q - p) + (w - s V u) tau`` is closest at
 
 and the rover is in conflict with the track when ``|d(tau*)| < R``, ``R = robot radius +
 margin_m`` (the track is an echo on the obstacle's near surface, so its own size is not added).
+Each track is checked with two velocities: ``w`` as estimated, and ``w - max(w . u, 0) u``, going
+straight across the course. A side beam's echo slides forward over a crosser's face as the rover
+drives past it, so the track's velocity along the course carries part of the rover's own (in the
+runner's ``crossing`` seed 33, 1.0 m/s along for a walker crossing at right angles): taken as
+estimated, the crosser would pass ahead of a stopped rover that is in fact standing in its lane.
 The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that is in
-conflict with no track; ``None`` (no limit) when full speed is. When every fraction is in conflict
-(an obstacle whose estimated course would reach even a stopped rover), the fraction that keeps it
-farthest away: full speed only when that is the one (passing well ahead of it), never by default.
+conflict with no track under either velocity; ``None`` (no limit) when full speed is. When every
+fraction is in conflict (an obstacle whose course would reach even a stopped rover), the fraction
+whose least ``|d(tau*)| - R`` over tracks and velocities is largest: full speed only when that
+is the one (passing ahead of it), never by default.
 
 Only tracks that *cross* are yielded to: the component of ``w`` across ``u`` of at least
 ``min_cross_mps`` and at least ``sin(min_cross_deg)`` of its speed (a track's velocity is noisy: a
@@ -40,12 +46,14 @@ surfaces and give its tracks velocities that are not there.
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
 full speed clears it by ``release_margin_m`` more, or its course comes within half of
 ``min_cross_deg`` of the line (the maturity tests no longer apply), so that track noise does not
-make the rover lurch. A yielded-to obstacle often loses its track while it passes (its echo jumps
-across its surface from one beam to the next, beyond the tracker's gate, and a new track starts
-with no velocity). So the last estimate of every track yielded to is kept, and while its track is
-gone (not merely no longer moving: that one is static now, and released) it stands in for it,
-moving on at its last velocity, for at most ``max_wait_s``: the rover waits until that obstacle
-has passed, not until it was lost.
+make the rover lurch. The margin only holds a yield that full speed would end: when no speed is
+free it does not count against full speed in the ranking above (it did, and held the rover at a
+slower speed nearer the crosser). A yielded-to obstacle often loses its track while it passes
+(its echo jumps across its surface from one beam to the next, beyond the tracker's gate, and a
+new track starts with no velocity). So the last estimate of every track yielded to is kept, and
+while its track is gone (not merely no longer moving: that one is static now, and released) it
+stands in for it, moving on at its last velocity, for at most ``max_wait_s``: the rover waits
+until that obstacle has passed, not until it was lost.
 """
 
 from __future__ import annotations
@@ -121,7 +129,9 @@ class Yielder:
             elif (off_course or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
                   or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
                 continue
-            crossing.append((ident, e - east_m, n - north_m, track.v_east_mps, track.v_north_mps))
+            along_mps = max(track.v_east_mps * ue + track.v_north_mps * un, 0.0)  # forward along the course: maybe the echo sliding
+            crossing.append((ident, e - east_m, n - north_m, ((track.v_east_mps, track.v_north_mps),
+                                                              (track.v_east_mps - along_mps * ue, track.v_north_mps - along_mps * un))))
         if not crossing:
             self._yielding = {}
             return YieldDecision(None)
@@ -129,14 +139,17 @@ class Yielder:
         best_fraction, best_m = 1.0, -math.inf
         for fraction in (i / steps for i in range(steps, -1, -1)):
             vr_e, vr_n = fraction * speed_mps * ue, fraction * speed_mps * un
-            worst_m = math.inf  # the closest any crossing track comes, less the margin it needs
-            for ident, re, rn, we, wn in crossing:
-                clear_m = radius_m + (p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0)
-                worst_m = min(worst_m, closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - clear_m)
+            worst_m, free = math.inf, True  # the closest any crossing track comes, less the margin it needs
+            for ident, re, rn, velocities in crossing:
+                release_m = p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0
+                for we, wn in velocities:
+                    clear_m = closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - radius_m
+                    worst_m, free = min(worst_m, clear_m), free and clear_m >= release_m
+            if free:
+                best_fraction = fraction
+                break
             if worst_m > best_m + 1e-9:
                 best_fraction, best_m = fraction, worst_m
-            if worst_m >= 0.0:
-                break
         if best_fraction >= 1.0:
             self._yielding = {}
             return YieldDecision(None)
@@ -146,5 +159,6 @@ class Yielder:
 
     def _conflicts(self, track: tuple, speed_mps: float, ue: float, un: float, radius_m: float) -> bool:
         """Whether the track is in conflict with the rover at full speed (one it is yielding to)."""
-        _, re, rn, we, wn = track
-        return closest_approach_m(re, rn, we - speed_mps * ue, wn - speed_mps * un, self.params.horizon_s) < radius_m
+        _, re, rn, velocities = track
+        return any(closest_approach_m(re, rn, we - speed_mps * ue, wn - speed_mps * un, self.params.horizon_s) < radius_m
+                   for we, wn in velocities)

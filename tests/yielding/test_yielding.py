@@ -95,6 +95,45 @@ def test_when_no_speed_is_free_the_one_that_keeps_the_obstacle_farthest():
     assert yielder().limit(0.0, 0.0, NORTH, 1.2, [at_the_rover], 0.0).speed_limit_mps == 0.0
 
 
+def test_a_crosser_level_with_the_rover_whose_echo_slides_forward_is_not_stopped_for():
+    """Seed 33 of the runner's ``crossing``: a walker 2.5 m to the right, level with the rover,
+    crossing at right angles, whose side-beam echo slides forward over its face with the rover
+    (its track: 1.7 m/s across, 1.05 m/s along). Taken as estimated it would pass ahead of a
+    stopped rover (1.29 m); going straight across, it walks into one standing in its lane."""
+    level = Track(1, 0.0, 2.49, -0.02, -1.70, 1.05, hits=20, born_en=(4.0, -0.5))
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [level], 0.0).speed_limit_mps != 0.0
+
+
+def test_a_rover_never_stops_in_the_lane_of_a_crosser_whose_echo_slides_forward():
+    """Perpendicular crossers from the right at 1 m/s, whose tracks carry 70 % of the rover's
+    speed forward (the sliding echo), at any timing: the rover never stands with the crosser's
+    lane within its radius while the crosser is still to come, and keeps its distance."""
+    for start_east in [2.0 + 0.25 * i for i in range(13)]:
+        for lane in [1.0 + 0.25 * j for j in range(13)]:
+            y, north, speed, closest = yielder(), 0.0, 1.2, math.inf
+            for k in range(300):
+                t = k * 0.05
+                east = start_east - t
+                track = Track(1, t, east, lane, -1.0, 0.7 * speed, hits=20, born_en=(start_east + 3.0, lane))
+                limit = y.limit(0.0, north, NORTH, 1.2, [track], t).speed_limit_mps
+                speed = 1.2 if limit is None else limit
+                assert not (speed == 0.0 and east > 0.0 and abs(lane - north) < ROBOT_RADIUS_M), (start_east, lane, t)
+                north += speed * 0.05
+                closest = min(closest, math.hypot(east, lane - north))
+            assert closest > ROBOT_RADIUS_M + 0.2, (start_east, lane)
+
+
+def test_when_no_speed_is_free_the_release_margin_does_not_rank_them():
+    """A crosser yielded to, level with the rover 1.5 m to its right: no speed is free, and full
+    speed keeps it farthest (1.15 m, 75 % 1.0 m). The release margin holds a yield until full speed
+    clears the crosser by that much more; it does not count against full speed among speeds that
+    are all in conflict (it did, and held the rover at 75 %, nearer the crosser)."""
+    level = Track(1, 0.0, 1.5, 0.0, -1.0, 0.0, hits=20, born_en=(4.5, 0.0))
+    y = yielder()
+    assert y.limit(0.0, -1.0, NORTH, 1.2, [level], 0.0).speed_limit_mps == 0.0  # 1 m further back it stops for it
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [level], 0.0).speed_limit_mps is None
+
+
 def test_unsure_tracks_are_not_yielded_to():
     """Few echoes, or a velocity still uncertain: no yield (a sliding echo makes such tracks)."""
     young = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=3)
