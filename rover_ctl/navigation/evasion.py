@@ -26,9 +26,12 @@ and its clearance is ``min_k |p_k - (q + w t_k)|``. The track is an echo on the 
 surface, so the clearance needed, ``R = robot half-width + margin_m``, carries the obstacle's own
 size in ``margin_m``. The first candidate, in order of growing ``delta`` and the faster speed
 first, whose clearance is at least ``R`` wins; when none is, the one with the largest clearance.
-The side is away from the track: the sign of ``-(u x r)``, ``u`` the course's unit vector and
-``r = q - p`` (right when the track is dead ahead, as road users keep right); it is chosen when the
-manoeuvre starts and kept to its end, so that the rover does not weave.
+The side is chosen when the manoeuvre starts and kept to its end, so that the rover does not
+weave: the side whose winner comes first in that order (the smaller turn), then the one with more
+clearance, then the side away from the track, the sign of ``-(u x r)``, ``u`` the course's unit
+vector and ``r = q - p`` (right when the track is dead ahead, as road users keep right). A rover
+coming back to its line at an angle, with a walker on the line, is often already clear on its own
+side: turning across the walker's way towards the "away" side would be the larger manoeuvre.
 
 **Which tracks.** Confirmed moving tracks with at least ``min_hits`` echoes, a velocity standard
 deviation of at most ``max_speed_sd_mps`` and ``min_travel_m`` travelled from the first echo (a
@@ -45,7 +48,8 @@ slowed rover gives echoes that seem to come at it).
 **While evading** the track's estimate is latched when the manoeuvre starts and moved on at its
 velocity; a live estimate replaces it only while its velocity stays within ``max_velocity_jump_mps``
 of the one latched at the start (a turning rover's beams slide over the walker and corrupt its velocity). A side
-whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to. The manoeuvre ends
+whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to while the other
+reads farther. The manoeuvre ends
 when the obstacle is behind the rover (``r . h < 0``, ``h`` its heading, and separating), when
 going straight along the course clears it by ``release_margin_m`` more than ``R``, or after
 ``max_s``.
@@ -114,15 +118,13 @@ class Evader:
         live = {t.ident: t for t in tracks}
         radius_m = self._half_width_m() + p.margin_m
         ue, un = math.cos(course_rad), math.sin(course_rad)
-        if self._track is None:
+        start = self._track is None
+        if start:
             if not may_start:
                 return None
             self._track = self._threat(time_s, east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, live.values(), radius_m)
             if self._track is None:
                 return None
-            e, n = self._track.position_at(time_s)
-            ahead_left = ue * (n - north_m) - un * (e - east_m)  # u x r: > 0 when the track is left of the course
-            self._side = -1.0 if ahead_left >= 0.0 else 1.0
             self._started_s = time_s
             self._v0 = (self._track.v_east_mps, self._track.v_north_mps)
         else:
@@ -132,14 +134,21 @@ class Evader:
         re, rn = e - east_m, n - north_m
         behind = re * math.cos(heading_rad) + rn * math.sin(heading_rad) < 0.0 and re * track.v_east_mps + rn * track.v_north_mps > 0.0
         straight_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
-        if behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s:
+        if not start and (behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s):
             self._track = None
             return None
-        side = self._side
-        if ranges is not None and ranges.get(FRONT_LEFT if side > 0 else FRONT_RIGHT, 0.0) < p.side_free_m:
-            if ranges.get(FRONT_RIGHT if side > 0 else FRONT_LEFT, 0.0) >= p.side_free_m:  # a silent one is not free
-                side = self._side = -side
-        target_rad, speed = self._choose(east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m)
+        choose = lambda side: self._choose(east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m)  # noqa: E731
+        free = {side: ranges is None or ranges.get(FRONT_LEFT if side > 0 else FRONT_RIGHT, 0.0) >= p.side_free_m for side in (1.0, -1.0)}
+        if start:  # the side whose manoeuvre is smallest (fewest degrees off, then most clearance)
+            away = -1.0 if ue * rn - un * re >= 0.0 else 1.0  # u x r > 0: the track is left of the course
+            options = {side: choose(side) for side in (away, -away)}
+            sides = [side for side in options if free[side]] or list(options)  # a silent rangefinder is not free
+            self._side = min(sides, key=lambda side: (options[side][2], -options[side][3], side != away))
+            target_rad, speed = options[self._side][:2]
+        else:
+            if not free[self._side] and free[-self._side]:
+                self._side = -self._side
+            target_rad, speed = choose(self._side)[:2]
         omega = max(-p.max_yaw_rate_radps, min(p.max_yaw_rate_radps, p.heading_gain * math.remainder(target_rad - heading_rad, math.tau)))
         return Drive(speed, omega, track.ident)
 
@@ -173,18 +182,20 @@ class Evader:
             self._track = _latch(live)
 
     def _choose(self, east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m):
-        """(heading, speed): the first candidate that clears ``radius_m``, else the clearest."""
+        """(heading, speed, rank, clearance): the first candidate on ``side`` that clears
+        ``radius_m`` and its rank in the order tried, else the clearest one and rank infinity."""
         p = self.params
-        best, best_m = None, -math.inf
+        best, rank = None, 0
         for delta_deg in p.deltas_deg:
             target_rad = course_rad + side * math.radians(delta_deg)
             for speed in (speed_mps, speed_mps * p.slow_fraction):
                 clear_m = self._rollout(east_m, north_m, heading_rad, speed_now_mps, target_rad, speed, e, n,
                                         track.v_east_mps, track.v_north_mps)  # fmt: skip
                 if clear_m >= radius_m:
-                    return target_rad, speed
-                if clear_m > best_m:
-                    best, best_m = (target_rad, speed), clear_m
+                    return target_rad, speed, rank, clear_m
+                if best is None or clear_m > best[3]:
+                    best = (target_rad, speed, math.inf, clear_m)
+                rank += 1
         return best
 
     def _rollout(self, x, y, psi, v, target_rad, speed, qe, qn, we, wn) -> float:

@@ -42,16 +42,17 @@ def walker(east_m: float, north_m: float, v_east: float, v_north: float):
     return at, track
 
 
-def drive(ev: Evader, at, track, ranges=None, duration_s: float = 8.0, dt_s: float = 0.04, may_start=lambda t: True):
+def drive(ev: Evader, at, track, ranges=None, duration_s: float = 8.0, dt_s: float = 0.04, may_start=lambda t: True,
+          start=(0.0, 0.0, NORTH), target=TARGET):  # fmt: skip
     """Closest distance between the rover's and the walker's centres, the sides stepped to
     (+1 left, -1 right, per step while evading) and where the rover ended."""
-    x, y, psi, v = 0.0, 0.0, NORTH, CRUISE_MPS
+    (x, y, psi), v = start, CRUISE_MPS
     closest, sides = math.inf, []
     for k in range(int(duration_s / dt_s)):
         t = k * dt_s
         we, wn = at(t)
         seen = math.hypot(we - x, wn - y) <= SENSOR_RANGE_M
-        course = math.atan2(TARGET[1] - y, TARGET[0] - x)
+        course = math.atan2(target[1] - y, target[0] - x)
         out = ev.step(t, x, y, psi, v, course, CRUISE_MPS, [track(t)] if seen else [], ranges, may_start=may_start(t))
         if out is None:
             speed, omega = CRUISE_MPS, max(-1.5, min(1.5, 3.0 * math.remainder(course - psi, math.tau)))
@@ -88,6 +89,16 @@ def test_it_steps_to_the_side_the_walker_is_not_on_and_right_when_dead_ahead():
         at, track = walker(offset_m, 6.0, 0.0, -0.9)
         _, sides, _ = drive(evader(), at, track)
         assert sides[0] == expected, offset_m  # the first turn of the manoeuvre
+
+
+def test_a_rover_coming_back_to_its_line_at_an_angle_keeps_to_its_own_side_of_a_walker_on_the_line():
+    """Heading back across the line from 1.5 m left of it, the walker on the line is left of the
+    rover's course: stepping right ("away" from it) would cross the walker's way; turning left, to
+    pass on the side the rover is already on, is the smaller manoeuvre."""
+    at, track = walker(0.0, 7.0, 0.0, -0.7)
+    course = math.atan2(9.0, 3.0)  # towards a target right of the walker's line
+    closest, sides, _ = drive(evader(), at, track, start=(-1.5, 0.0, course), target=(1.5, 9.0), duration_s=6.0)
+    assert sides[0] == 1 and closest >= HALF_WIDTH_M + 0.5, (sides[:3], closest)
 
 
 def test_a_side_whose_diagonal_rangefinder_sees_something_near_is_not_stepped_to():
