@@ -8,11 +8,13 @@ from pathlib import Path
 
 import pytest
 
+from bench.bench_navigation import ACCEPTANCE_RADIUS_M, write_inputs
 from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimOptions, simulate
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
 from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
+from rover_ctl.tuning.scenarios import scenarios
 from rover_ctl.vocabulary import Cmd
 
 HOME = (-35.363261, 149.165230, 584.0)
@@ -60,6 +62,20 @@ def test_a_pedestrian_crossing_the_path_is_let_through(tmp_path):
     armed_s = next(float(r["t_s"]) for r in rows if r["armed"] == "1")
     pedestrian_east_m = -speed_mps * arrive_s + speed_mps * (crossed["t_s"] - armed_s)
     assert pedestrian_east_m > crossed["east_m"], (pedestrian_east_m, crossed)
+
+
+@pytest.mark.parametrize("seed", [18, 25])
+def test_walkers_coming_head_on_are_stepped_aside_from(tmp_path, seed):
+    """The navigation benchmark's head_on worlds 18 and 25 (one or two walkers coming down the leg
+    at the rover): the rule base alone struck the walker in each of 2 runs of each, the rover that
+    steps aside (evasion, the default) passed in each of 6: it steps aside, without contact."""
+    mission, world = write_inputs(scenarios(seed)["head_on"], tmp_path)
+    out = tmp_path / "run"
+    metrics = simulate(SimOptions(mission=mission, out=out, world=world, seed=seed,
+                                  config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}"]), plots=False)  # fmt: skip
+    assert metrics["success"] and metrics["collisions"] == 0, metrics
+    rows = list(csv.DictReader((out / "control.csv").open()))
+    assert any(r["evade_track"] for r in rows), "the rover never stepped aside"
 
 
 def test_an_830_m_mission_completes_under_sim_defaults(tmp_path):
