@@ -535,11 +535,8 @@ class Autopilot:
                 self._say(text)
             self.passage.events.clear()
             if drive is not None:
-                self._commanded_speed_mps = abs(drive.speed_mps)
-                turn_mps = drive.yaw_rate_radps * self.config.robot.track_m / 2.0
-                left, right = self._speed_to_rpm(drive.speed_mps - turn_mps), self._speed_to_rpm(drive.speed_mps + turn_mps)
-                row.update(passage=drive.state, left_set_rpm=left, right_set_rpm=right)
-                return self.wheels.step(t_s, dt_s, left, right)
+                row.update(passage=drive.state)
+                return self._speed_and_turn(t_s, dt_s, drive.speed_mps, drive.yaw_rate_radps, row)
         else:
             self.passage.reset()
         ranges = self.proximity.ranges(t_s, pose.east_m, pose.north_m, pose.heading_rad, {o: r.range_m for o, r in self._ranges.items()},
@@ -565,11 +562,8 @@ class Autopilot:
             evade = self.evader.step(t_s, pose.east_m, pose.north_m, pose.heading_rad, pose.speed_mps, course, speed_mps, tracks, ranges,
                                      may_start=not yielding)  # fmt: skip
             if evade is not None:
-                self._commanded_speed_mps = evade.speed_mps
-                turn_mps = evade.yaw_rate_radps * self.config.robot.track_m / 2.0
-                left, right = self._speed_to_rpm(evade.speed_mps - turn_mps), self._speed_to_rpm(evade.speed_mps + turn_mps)
-                row.update(evade_track=evade.track_ident, left_set_rpm=left, right_set_rpm=right)
-                return self.wheels.step(t_s, dt_s, left, right)
+                row.update(evade_track=evade.track_ident)
+                return self._speed_and_turn(t_s, dt_s, evade.speed_mps, evade.yaw_rate_radps, row)
         else:
             self.evader.reset()
         if yielding:
@@ -606,6 +600,15 @@ class Autopilot:
             self._map_obstacles = self.obstacle_map.obstacles(position)
             self.follower.set_persistent(self._map_obstacles)
             row.update(map_obstacles=len(self._map_obstacles))
+
+    def _speed_and_turn(self, t_s: float, dt_s: float, speed_mps: float, yaw_rate_radps: float, row: dict[str, Any]) -> WheelCommand:
+        """A manoeuvre's forward speed (m/s, negative: reverse) and yaw rate (rad/s, CCW) as wheel
+        setpoints, the navigator bypassed (a narrow passage, stepping aside)."""
+        self._commanded_speed_mps = abs(speed_mps)
+        turn_mps = yaw_rate_radps * self.config.robot.track_m / 2.0
+        left, right = self._speed_to_rpm(speed_mps - turn_mps), self._speed_to_rpm(speed_mps + turn_mps)
+        row.update(left_set_rpm=left, right_set_rpm=right)
+        return self.wheels.step(t_s, dt_s, left, right)
 
     def _speed_to_rpm(self, speed_mps: float) -> float:
         return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0
