@@ -78,8 +78,9 @@ def run(args: argparse.Namespace) -> int:
 
     def table(p: Progress) -> Table:
         t = Table(title=f"rover-ctl sim {args.mission.name}", show_header=False)
-        t.add_row("waypoint", f"{p.current_seq} of {len(p.reached)}/{p.waypoints_total} reached")
-        t.add_row("distance left", "-" if math.isnan(p.distance_left_m) else f"{p.distance_left_m:.1f} m")
+        driving = p.current_seq and len(p.reached) < p.waypoints_total
+        t.add_row("waypoints", f"{len(p.reached)} of {p.waypoints_total} reached" + (f", heading for #{p.current_seq}" if driving else ""))
+        t.add_row("to the waypoint", f"{p.distance_left_m:.1f} m" if driving and not math.isnan(p.distance_left_m) else "-")
         t.add_row("elapsed", f"sim {p.elapsed_sim_s:.1f} s, wall {p.elapsed_wall_s:.1f} s")
         t.add_row("collisions", str(p.collisions))
         t.add_row("status", p.last_text or "-")
@@ -89,14 +90,17 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         with Live(table(Progress()), console=console, refresh_per_second=4, transient=False) as live:
-            last = [0.0]
+            last, latest = [0.0], [None]
 
             def on_tick(p: Progress) -> None:
+                latest[0] = p
                 if time.monotonic() - last[0] > 0.25:
                     last[0] = time.monotonic()
                     live.update(table(p))
 
             metrics = simulate(options, on_tick)
+            if latest[0] is not None:  # the last tick, not the last one shown (shown at most 4 times a second)
+                live.update(table(latest[0]), refresh=True)
     except MissionFileError as exc:
         raise UserError(str(exc)) from None
     except (SimError, ReportError) as exc:
