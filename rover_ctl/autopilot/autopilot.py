@@ -54,11 +54,11 @@ from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.navigation.gaps import Passage
 from rover_ctl.navigation.navigator import Navigator
+from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.yielding import Yielder
-from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav

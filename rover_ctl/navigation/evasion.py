@@ -78,10 +78,6 @@ class Drive:
     track_ident: int
 
 
-def _latch(track: Track) -> Track:
-    return Track(track.ident, track.time_s, track.east_m, track.north_m, track.v_east_mps, track.v_north_mps)
-
-
 class Evader:
     """Steps aside from walkers coming head-on (see the module docstring)."""
 
@@ -137,7 +133,9 @@ class Evader:
         if not start and (behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s):
             self._track = None
             return None
-        choose = lambda side: self._choose(east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m)  # noqa: E731
+        def choose(side: float) -> tuple[float, float, float, float]:
+            return self._choose(east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m)
+
         free = {side: ranges is None or ranges.get(FRONT_LEFT if side > 0 else FRONT_RIGHT, 0.0) >= p.side_free_m for side in (1.0, -1.0)}
         if start:  # the side whose manoeuvre is smallest (fewest degrees off, then most clearance)
             away = -1.0 if ue * rn - un * re >= 0.0 else 1.0  # u x r > 0: the track is left of the course
@@ -171,7 +169,7 @@ class Evader:
             miss_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
             if miss_m < best_m:
                 best, best_m = track, miss_m
-        return None if best is None else _latch(best)
+        return None if best is None else best.snapshot()
 
     def _refresh(self, live: Track | None) -> None:
         """A live estimate replaces the latched one while its velocity agrees with the one latched
@@ -179,7 +177,7 @@ class Evader:
         if live is None:
             return
         if math.hypot(live.v_east_mps - self._v0[0], live.v_north_mps - self._v0[1]) <= self.params.max_velocity_jump_mps:
-            self._track = _latch(live)
+            self._track = live.snapshot()
 
     def _choose(self, east_m, north_m, heading_rad, speed_now_mps, course_rad, speed_mps, e, n, track, side, radius_m):
         """(heading, speed, rank, clearance): the first candidate on ``side`` that clears

@@ -87,6 +87,10 @@ class Track:
     def speed_mps(self) -> float:
         return math.hypot(self.v_east_mps, self.v_north_mps)
 
+    def snapshot(self) -> "Track":
+        """A copy of the estimate (position and velocity; the tracker goes on updating its own)."""
+        return Track(self.ident, self.time_s, self.east_m, self.north_m, self.v_east_mps, self.v_north_mps)
+
     def position_at(self, time_s: float) -> tuple[float, float]:
         dt = time_s - self.time_s
         return self.east_m + self.v_east_mps * dt, self.north_m + self.v_north_mps * dt

@@ -74,11 +74,6 @@ class YieldDecision:
     track_ident: int | None = None
 
 
-def _snapshot(track: Track) -> Track:
-    """A copy of a track's estimate (the tracker goes on updating its own)."""
-    return Track(track.ident, track.time_s, track.east_m, track.north_m, track.v_east_mps, track.v_north_mps)
-
-
 def closest_approach_m(r_east: float, r_north: float, v_east: float, v_north: float, horizon_s: float) -> float:
     """Smallest ``|r + v tau|`` over ``tau`` in ``[0, horizon_s]`` (relative position and velocity)."""
     vv = v_east * v_east + v_north * v_north
@@ -154,7 +149,7 @@ class Yielder:
             self._yielding = {}
             return YieldDecision(None)
         conflicts = [c for c in crossing if self._conflicts(c, speed_mps, ue, un, radius_m)] or crossing
-        self._yielding = {c[0]: _snapshot(candidates[c[0]]) for c in conflicts}
+        self._yielding = {c[0]: candidates[c[0]].snapshot() for c in conflicts}
         return YieldDecision(best_fraction * speed_mps, min(self._yielding))
 
     def _conflicts(self, track: tuple, speed_mps: float, ue: float, un: float, radius_m: float) -> bool:
