@@ -8,7 +8,9 @@ The daemon is never told where the obstacles are: it sees them only with its ran
 * ``scattered``: the same legs with ``rover-sitl --scatter`` obstacles (seeded; >= 2 m gaps).
 * ``walls``: one straight leg of 40 m crossed by two walls, each with a 2.5 m gap off the line.
 * ``cul_de_sac``: a U of walls open towards the rover on the line of a 30 m leg.
-* ``moving``: a 0.6 m drum crossing the 30 m leg at 0.5 m/s, and one travelling against the rover.
+* ``moving``: a 0.6 m drum crossing the 30 m leg 12 m out at 0.5 m/s, timed (seeded, +-2 s) to
+  reach the leg when a rover at cruise speed gets there, and one walking down the leg towards the
+  rover at 0.3 m/s from 28 m out.
 * ``crossing``: crossing traffic on the two legs of ``open``: 2-5 drums (radius 0.3-0.6 m) at
   0.3-1.0 m/s (up to 80% of cruise speed), each crossing one leg at right angles from either side,
   timed (seeded, +-2 s) to reach the leg when a rover at cruise speed gets there.
@@ -21,9 +23,9 @@ The daemon is never told where the obstacles are: it sees them only with its ran
   its centre up to 2 m off the leg (seeded).
 * ``dense_clutter``: 30 drums (radius 0.2-0.5 m, >= 1.2 m apart) within 3 m of a 50 m leg (seeded).
 
-The moving obstacles of ``crossing``, ``head_on`` and ``overtaking`` start moving when the rover
-arms (world file ``"start": "armed"``, ``"start"`` in their dicts), so the encounter does not
-depend on how long the ground station took to upload and arm.
+Every scenario's moving obstacles start moving when the rover arms (world file ``"start":
+"armed"``, ``"start"`` in their dicts), so the encounter does not depend on how long the ground
+station took to upload and arm.
 """
 
 from __future__ import annotations
@@ -129,6 +131,7 @@ def scenarios(seed: int) -> dict[str, Scenario]:
             along = rng.uniform(3.0, 22.0)
             arrive_s = _arrival_s(30.0 + along) + rng.uniform(-ARRIVAL_JITTER_S, ARRIVAL_JITTER_S)
             crossing.append(_mover((along, 30.0 + side * speed * arrive_s), radius, (0.0, -side * speed)))
+    crossing_s = _arrival_s(12.0) + random.Random(seed * 104729 + 2).uniform(-ARRIVAL_JITTER_S, ARRIVAL_JITTER_S)  # moving's drum
     rng = random.Random(seed * 7919 + 1)
     head_on = [_mover((rng.uniform(-0.5, 0.5), rng.uniform(18.0, 28.0)), rng.uniform(0.25, 0.5), (0.0, -rng.uniform(0.3, 1.0)))
                for _ in range(rng.randint(1, 2))]  # fmt: skip
@@ -138,9 +141,8 @@ def scenarios(seed: int) -> dict[str, Scenario]:
         "scattered": Scenario("scattered", two_legs, scatter=SCATTER_COUNT),
         "walls": Scenario("walls", line, polygons=walls),
         "cul_de_sac": Scenario("cul_de_sac", [(0.0, 0.0), (0.0, 30.0)], polygons=cul),
-        "moving": Scenario("moving", [(0.0, 0.0), (0.0, 30.0)], moving=[
-            {"center_en": (-8.0, 12.0), "radius_m": 0.6, "velocity_en": (0.5, 0.0)},
-            {"center_en": (0.5, 28.0), "radius_m": 0.5, "velocity_en": (0.0, -0.3)},
+        "moving": Scenario("moving", [(0.0, 0.0), (0.0, 30.0)], moving=[  # one crosses the leg, one walks down it
+            _mover((-0.5 * crossing_s, 12.0), 0.6, (0.5, 0.0)), _mover((0.5, 28.0), 0.5, (0.0, -0.3)),
         ]),  # fmt: skip
         "crossing": Scenario("crossing", two_legs, moving=crossing),
         "head_on": Scenario("head_on", [(0.0, 0.0), (0.0, 30.0)], moving=head_on),
