@@ -38,7 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -47,7 +47,7 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 
 from rover_ctl.autopilot.executor import NAV_COMMANDS  # noqa: E402
-from rover_ctl.config import load_config  # noqa: E402
+from rover_ctl.config import GcsParams, load_config  # noqa: E402
 from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
 from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mavlink.signing import KeyStore  # noqa: E402
@@ -66,6 +66,13 @@ SITL_READY_TIMEOUT_S = 30.0
 """Wall seconds for the emulator to print its ready line."""
 GCS_CONNECT_TIMEOUT_S = 30.0
 """Wall seconds for the daemon's first heartbeat on the GCS link."""
+CONNECT_POLL_S = 1.0
+"""Each wait for that heartbeat, between which the children are checked: a daemon that exited
+at start is reported within about this long."""
+DAEMON_START_ATTEMPTS = 3
+"""Starts of the daemon when it exits 69 (EX_UNAVAILABLE: a link could not be opened) before it
+answers: the GCS port is picked free, then bound by the daemon, and a process beside this one
+(a second simulation, a test) can take it in between."""
 STALL_TIMEOUT_S = 20.0
 """Wall seconds without any message from the daemon before the run is declared stuck."""
 ARM_RETRY_S = 0.2
@@ -303,11 +310,20 @@ class SimRun:
                                    stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
         except SitlError as exc:
             raise SimError(str(exc)) from None
-        self._start_daemon()
         self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        self._connect_gcs()
+        for attempt in range(1, DAEMON_START_ATTEMPTS + 1):
+            self._start_daemon()
+            try:
+                self._connect_gcs()
+                break
+            except SimError:
+                if attempt == DAEMON_START_ATTEMPTS or self.daemon.poll() != os.EX_UNAVAILABLE:
+                    raise
+                self.gcs.close()  # the port picked free was taken before the daemon bound it: another one
+                self.gcs_port = free_port(socket.SOCK_DGRAM)
+                self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
         self.gcs.upload(self.mission)
 
     def _start_daemon(self) -> None:
@@ -317,7 +333,7 @@ class SimRun:
 
     def _connect_gcs(self) -> None:
         """Our GCS connection, once the daemon heartbeats on its GCS link."""
-        self.gcs = MissionClient(self.gcs_url, signing_key=self.options.signing_key)
+        self.gcs = MissionClient(self.gcs_url, replace(GcsParams(), client_connect_timeout_s=CONNECT_POLL_S), signing_key=self.options.signing_key)
         deadline = time.monotonic() + GCS_CONNECT_TIMEOUT_S
         while True:
             self._check_children()

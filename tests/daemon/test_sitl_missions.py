@@ -124,3 +124,19 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     overrides = [(m.chan1_raw, m.chan3_raw) for m in iter(lambda: log.recv_match(type="RC_CHANNELS_OVERRIDE"), None)]
     # Released once, then silent until the stop's single neutral.
     assert overrides[-2:] == [(0, 0), (1500, 1500)] and overrides.count((0, 0)) == 1
+
+
+def test_a_gcs_port_taken_before_the_daemon_binds_it_is_replaced(tmp_path):
+    """`rover-ctl sim` picks the daemon's GCS port free, then the daemon binds it: a process beside
+    it (a second simulation) can take it in between. The daemon then exits 69 (a link could not be
+    opened) and the run starts it again on another port, instead of failing."""
+    import socket
+
+    run = SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0))
+    taken = run.gcs_port
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as thief:
+        thief.bind(("127.0.0.1", taken))
+        with run:
+            assert run.gcs_port != taken and run.gcs_url.endswith(f":{run.gcs_port}")
+            assert run.daemon.poll() is None
+            assert "SYSID_THISMAV" in download_params(run)  # the mission went up (start) and the daemon answers
