@@ -80,6 +80,11 @@ def _min(values: np.ndarray) -> float:
     return round(float(values.min()), 2) if values.size else math.nan
 
 
+def _max(values: np.ndarray) -> float:
+    values = values[np.isfinite(values)]
+    return float(values.max()) if values.size else math.nan
+
+
 def _path_length(east: np.ndarray, north: np.ndarray) -> float:
     return float(np.sum(np.hypot(np.diff(east), np.diff(north)))) if east.size > 1 else 0.0
 
@@ -171,7 +176,7 @@ def compute_metrics(run: Run, timed_out: bool = False) -> dict[str, Any]:
         "planned_length_m": round(planned_m, 2),
         "duration_s": round(end - start, 2),
         "cross_track_rms_m": round(_rms(c["cross_track_m"][active]), 3),
-        "cross_track_max_m": round(float(np.nanmax(np.abs(c["cross_track_m"][active]))) if active.any() else math.nan, 3),
+        "cross_track_max_m": round(_max(np.abs(c["cross_track_m"][active])), 3),
         "position_rmse_m": round(_rms(position_err), 3),
         "gps_rmse_m": round(_rms(np.array(gps_err)), 3),
         "gps_bias_rms_m": round(_rms(np.array(gps_bias)), 3),
