@@ -386,6 +386,8 @@ _DECLARED: tuple[tuple, ...] = (
     ("yielding.max_speed_sd_mps", "YLD_MAX_VEL_SD", 0.01, 10.0, RW, {}),
     ("yielding.min_travel_m", "YLD_MIN_TRAVEL", 0.0, 100.0, RW, {}),
     ("yielding.max_heading_off_deg", "YLD_MAX_HDG_OFF", 0.0, 180.0, RW, {"units": "deg"}),
+    ("yielding.after_evasion_s", "YLD_AFTER_EVD", 0.0, 60.0, RW, {}),
+    ("yielding.after_evasion_heading_off_deg", "YLD_EVD_HDG_OFF", 0.0, 180.0, RW, {"units": "deg"}),
     ("yielding.max_wait_s", "YLD_MAX_WAIT", 0.0, 120.0, RW, {}),
     ("yielding.speed_steps", "YLD_SPD_STEPS", 1, 20, RW, {}),
     ("evasion.enabled", "EVD_ENABLE", 0, 1, RW, {}),

@@ -41,7 +41,12 @@ echo (as the rover drives past or turns by a static obstacle its echo slides ove
 face and makes tracks that seem to move, but never far from where they started). And none starts
 while the rover points more than ``max_heading_off_deg`` away from its course (mid-turn around
 something): the model has it going along the course, and a turning rover's beams sweep over
-surfaces and give its tracks velocities that are not there.
+surfaces and give its tracks velocities that are not there. The limit (45 degrees) is wider than
+the evader's (30): a crosser the rule base has turned the rover from, the way it walks, must
+still be yielded to, or it strikes the rover's flank. For ``after_evasion_s`` after the evader
+last drove, the limit is ``after_evasion_heading_off_deg`` (30): the rover is turning back to its
+line, and a second walker coming head-on, its velocity swept sideways, would read as crossing and
+stop the rover in its way instead of being stepped aside from.
 
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
 full speed clears it by ``release_margin_m`` more, or its course comes within half of
@@ -90,6 +95,11 @@ class Yielder:
         self._robot_radius_m = robot_radius_m
         self._yielding: dict[int, Track] = {}
         """Tracks yielded to: the last estimate of each (a copy), kept while it is in conflict."""
+        self._evaded_s = -math.inf
+
+    def evaded(self, time_s: float) -> None:
+        """The evader (``rover_ctl.navigation.evasion``) drove the rover at ``time_s``."""
+        self._evaded_s = time_s
 
     def limit(self, east_m: float, north_m: float, course_rad: float, speed_mps: float,
               tracks: Iterable[Track], time_s: float, alive: Collection[int] = (),
@@ -98,7 +108,8 @@ class Yielder:
         towards its target) at ``speed_mps``, among the moving ``tracks``; ``alive`` names every
         track the tracker still has, moving or not (one that stopped moving is no longer waited for;
         one that is gone is, as last seen). ``heading_rad``: where the rover points; no new yield
-        starts while it is more than ``max_heading_off_deg`` off the course."""
+        starts while it is more than ``max_heading_off_deg`` off the course (within
+        ``after_evasion_s`` of ``evaded``: ``after_evasion_heading_off_deg``)."""
         p = self.params
         if not p.enabled or speed_mps <= 0.0:
             self._yielding.clear()
@@ -112,7 +123,8 @@ class Yielder:
         ue, un = math.cos(course_rad), math.sin(course_rad)
         radius_m = self._robot_radius_m() + p.margin_m
         min_share = math.sin(math.radians(p.min_cross_deg))
-        off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(p.max_heading_off_deg)
+        off_limit_deg = p.after_evasion_heading_off_deg if time_s - self._evaded_s < p.after_evasion_s else p.max_heading_off_deg
+        off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(off_limit_deg)
         half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
         crossing = []
         for ident, track in candidates.items():

@@ -220,6 +220,12 @@ def ex_yielding(d: Daemon) -> list:
             speed = speed_limit if decision.speed_limit_mps is None else decision.speed_limit_mps
             north += speed * 0.1
             trace.append((decision.speed_limit_mps, decision.track_ident))
+    yielder._yielding.clear()  # just back from stepping aside, 40 degrees off the course: the tighter limit for a while
+    yielder.evaded(20.0)
+    for k in range(40):
+        t = 20.0 + 0.1 * k
+        track = Track(2, t, -2.0 + 0.8 * k * 0.1, 2.0, 0.8, 0.0, hits=20, born_en=(-4.0, 2.0))
+        trace.append(yielder.limit(0.0, 0.0, math.pi / 2, 1.2, [track], t, heading_rad=math.pi / 2 - math.radians(40.0)).speed_limit_mps)
     return trace
 
 

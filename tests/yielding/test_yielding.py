@@ -145,13 +145,15 @@ def test_unsure_tracks_are_not_yielded_to():
 
 
 def test_no_new_yield_while_the_rover_points_off_its_course():
-    """Mid-turn around something (heading 40 degrees off the course): its tracks' velocities are
-    swept echoes, so no yield starts; once one has started it holds through a turn."""
+    """Mid-turn around something (heading 50 degrees off the course, beyond the default 45): its
+    tracks' velocities are swept echoes, so no yield starts; at 40 degrees one does (a crosser the
+    rule base turned from); once one has started it holds through a turn."""
     track = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
     y = yielder()
-    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(50.0)).speed_limit_mps is None
+    assert yielder().limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is not None
     assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=NORTH - math.radians(10.0)).speed_limit_mps is not None
-    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.05, heading_rad=NORTH - math.radians(40.0)).speed_limit_mps is not None
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.05, heading_rad=NORTH - math.radians(50.0)).speed_limit_mps is not None
 
 
 def test_disabled_or_standing_still_no_limit():
@@ -178,3 +180,16 @@ def test_perpendicular_crossing_traffic_never_comes_within_the_robot_radius(star
         north += (1.2 if decision.speed_limit_mps is None else decision.speed_limit_mps) * 0.05
         closest = min(closest, math.hypot(track.east_m, track.north_m - north))
     assert closest > ROBOT_RADIUS_M
+
+
+def test_just_after_stepping_aside_the_heading_limit_is_the_evaders():
+    """Turning back to its line after stepping aside from a walker, 40 degrees off the course: a
+    second walker's swept track must not start a yield (it is the evader's); once
+    ``after_evasion_s`` has passed, the wider limit applies again."""
+    track = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
+    off = NORTH - math.radians(40.0)
+    y = yielder()
+    y.evaded(0.0)
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=off).speed_limit_mps is None
+    late = Track(1, 3.5, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [late], 3.5, heading_rad=off).speed_limit_mps is not None
