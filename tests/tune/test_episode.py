@@ -7,9 +7,10 @@ count, path length within ``PATH_TOLERANCE`` and mission time within ``TIME_TOLE
 docstrings give the largest differences measured; GPS and sensor noise are drawn per sample, and
 the runner hands readings over as they are sampled instead of on the emulator's stream grid).
 
-The worlds: two of ``scattered`` (static obstacles), two of ``crossing`` (2-5 moving drums) and
-one of ``moving`` (its drums, like every scenario's, start when the rover arms: until they did,
-the two met different encounters, the runner arming at 3 s of sim time and the SITL run at 34 s).
+The worlds: two of ``scattered`` (static obstacles) and two of ``crossing`` (2-5 moving drums).
+Not ``moving``: its crossing drum is timed to meet the rover, which then stops, escorts it or
+passes, and a few centimetres of GPS noise choose between them (seed 2 drove 38.8 m in the runner
+and 29.5 m in a suite's SITL run, after agreeing in four runs before).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ yielding the two agreed within 1%."""
 
 
 @pytest.mark.sitl
-@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 1), ("crossing", 2), ("moving", 2)])
+@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 1), ("crossing", 2)])
 def test_the_runner_reproduces_a_lockstep_sitl_run(tmp_path, name, seed):
     scenario = scenarios(seed)[name]
     mission, world = write_inputs(scenario, tmp_path)
