@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
+import sys
 import time
 from pathlib import Path
 
@@ -53,6 +55,9 @@ def run(args: argparse.Namespace) -> int:
     from rover_ctl.config import load_config
     from rover_ctl.mission.files import MissionFileError, load_mission
 
+    # SIGTERM (a service manager, `timeout`) unwinds like Ctrl-C: the run stops its emulator and
+    # daemon on the way out instead of leaving them running.
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     if args.obstacles is not None and args.obstacles < 0:
         raise UserError(f"--obstacles {args.obstacles}: expected a count >= 0")
     if args.world is not None and not args.world.is_file():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import socket
 import subprocess
@@ -182,3 +183,33 @@ def test_sim_budget_from_the_mission_and_the_daemon_speed_unless_given(tmp_path)
     slower = SimRun(SimOptions(mission=path, out=tmp_path / "b", config_overrides=["executor.cruise_speed_mps=0.6"])).budget_s
     assert slower == pytest.approx(2.0 * budget, rel=1e-3)
     assert SimRun(SimOptions(mission=path, out=tmp_path / "c", timeout_s=50.0)).budget_s == 50.0
+
+
+def test_sigterm_to_sim_stops_its_emulator_and_daemon(tmp_path):
+    """`rover-ctl sim` under a service manager or `timeout` gets SIGTERM: it must take its two
+    children with it (it used to die at once and leave both running)."""
+    import time
+    from pathlib import Path
+
+    mission = Path(__file__).resolve().parents[2] / "missions" / "cmac_loop.waypoints"
+    proc = subprocess.Popen([*ROVER_CTL, "sim", str(mission), "--lockstep", "--out", str(tmp_path / "runs"), "--json"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    children_file = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+    children: list[str] = []
+    try:
+        deadline = time.monotonic() + 30.0
+        while len(children) < 2 and time.monotonic() < deadline:  # the emulator, then the daemon
+            time.sleep(0.1)
+            children = children_file.read_text().split() if children_file.exists() else []
+        assert len(children) >= 2, children
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(20) == 128 + signal.SIGTERM
+        assert not [pid for pid in children if Path(f"/proc/{pid}").exists()], "a child outlived rover-ctl sim"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for pid in children:  # a failed run must not leave them behind either
+            try:
+                os.kill(int(pid), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
