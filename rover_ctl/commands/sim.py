@@ -44,6 +44,16 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # SIGTERM (a service manager, `timeout`) unwinds like Ctrl-C: the run stops its daemon and
+    # emulator on the way out instead of leaving them running.
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
+    try:
+        return _run(args)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.live import Live
     from rich.table import Table
@@ -55,9 +65,6 @@ def run(args: argparse.Namespace) -> int:
     from rover_ctl.config import load_config
     from rover_ctl.mission.files import MissionFileError, load_mission
 
-    # SIGTERM (a service manager, `timeout`) unwinds like Ctrl-C: the run stops its emulator and
-    # daemon on the way out instead of leaving them running.
-    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     if args.obstacles is not None and args.obstacles < 0:
         raise UserError(f"--obstacles {args.obstacles}: expected a count >= 0")
     if args.world is not None and not args.world.is_file():
