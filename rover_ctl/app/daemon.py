@@ -511,11 +511,19 @@ class Daemon:
         return Readings(
             ranges=dict(self.ranges),
             vehicle_age_s=vehicle_age_s,
-            gcs_age_s=math.inf if gcs_s is None else max(0.0, t_s - gcs_s),
+            gcs_age_s=math.inf if gcs_s is None else self._gcs_age_s(t_s, gcs_s),
             gps_age_s=math.inf if self.last_fix_s is None else max(0.0, t_s - self.last_fix_s),
             sensor_rates_hz=self._sensor_rates(),
             odometry_planned_hz=self.stream_plan.rates_hz.get(budget.EXTRA1) if self.stream_plan else None,
         )
+
+    def _gcs_age_s(self, t_s: float, heartbeat_vehicle_s: float) -> float:
+        """The last GCS heartbeat's age: the smaller of its age in vehicle time and in wall time.
+        A ground station paces its heartbeat by the wall clock, and the vehicle's clock may run
+        faster (lockstep) or slower (a starved simulator): a heartbeat is late only when it is late
+        by both. On a real vehicle the two clocks agree."""
+        wall_age_s = time.monotonic() - self._gcs_heartbeat_wall_s
+        return max(0.0, min(t_s - heartbeat_vehicle_s, wall_age_s))
 
     def _check_silence(self) -> None:
         """Nothing at all from the vehicle (not even lockstep markers, which would drive the

@@ -10,10 +10,9 @@ COMPLETE ends the run), MISSION_ITEM_REACHED, HEARTBEAT, the position; collision
 emulator's truth log (``collision`` records, read as it grows). A second emulator endpoint (sysid
 254, never allowed to drive) sets the emulator's SIM_* fault parameters (tests use it).
 
-Our GCS heartbeat goes out every ``GCS_HEARTBEAT_PERIOD_S`` of wall time or
-``GCS_HEARTBEAT_SIM_PERIOD_S`` of sim time (read from the emulator's ATTITUDE on the watcher
-endpoint), whichever comes first: the daemon ages it in vehicle time, which in lockstep runs faster
-than the wall clock.
+Our GCS heartbeat goes out every ``GCS_HEARTBEAT_PERIOD_S`` of wall time, as a ground station
+sends it; lockstep runs faster than that clock, and the daemon calls a heartbeat late only when it
+is late in both vehicle and wall time.
 
 Ports are chosen free on 127.0.0.1: the vehicle link is TCP (the daemon connects to the
 emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: pymavlink serves
@@ -81,9 +80,6 @@ STOP_TIMEOUT_S = 10.0
 """Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
 GCS_HEARTBEAT_PERIOD_S = 1.0
 """Our GCS heartbeat period in wall time, as ground stations send it."""
-GCS_HEARTBEAT_SIM_PERIOD_S = 0.5
-"""...and in sim time: the daemon ages the heartbeat in vehicle time, which lockstep runs faster
-than the wall clock; half a second keeps it well inside any sensible GCS failsafe timeout."""
 
 
 BUDGET_MARGIN = 2.0
@@ -240,7 +236,6 @@ class SimRun:
         self.send_heartbeats = True
         """Our GCS heartbeat at 1 Hz, as a ground station sends it (tests pause it for the GCS failsafe)."""
         self._next_heartbeat_wall = 0.0
-        self._next_heartbeat_sim = 0.0
         self._truth = TruthTail(self.out / "truth.jsonl")
         self.daemon_log_run = self.out
         self.daemon_output = self.out / "daemon.log"
@@ -462,17 +457,13 @@ class SimRun:
                 self._param_ack[msg.param_id] = float(msg.param_value)
             elif msg.get_type() == "ATTITUDE":  # the emulator's own clock, at its sensor rate
                 self.progress.sim_time_s = max(self.progress.sim_time_s, msg.time_boot_ms / 1000.0)
-                self._heartbeat()
         self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())
         self._check_children()
 
     def _heartbeat(self) -> None:
-        """Our GCS heartbeat, due every period of wall time or of sim time."""
-        p = self.progress
-        due = time.monotonic() >= self._next_heartbeat_wall or p.sim_time_s >= self._next_heartbeat_sim
-        if self.send_heartbeats and due:
+        """Our GCS heartbeat, due every period of wall time."""
+        if self.send_heartbeats and time.monotonic() >= self._next_heartbeat_wall:
             self._next_heartbeat_wall = time.monotonic() + GCS_HEARTBEAT_PERIOD_S
-            self._next_heartbeat_sim = p.sim_time_s + GCS_HEARTBEAT_SIM_PERIOD_S
             self.gcs.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
     def _observe(self, msg: Any) -> None:

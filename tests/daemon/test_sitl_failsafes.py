@@ -57,6 +57,9 @@ def test_failsafes_trigger_and_clear(tmp_path):
         run.sitl_param("SIM_LINK_QUIET", 0)
         assert said(run, "FS vehicle link cleared")
 
+        # Our heartbeat goes out at 1 Hz of wall time, as a ground station's does, while lockstep
+        # runs several times faster: never late so far, since it is late only by both clocks.
+        assert not any(t.startswith("FS GCS lost") for t in run.progress.texts)
         # The ground station stops its heartbeat: hold (failsafe.gcs_action), cleared when it is back.
         run.send_heartbeats = False
         assert said(run, "FS GCS lost: hold", sim_timeout_s=None, wall_timeout_s=10.0)
@@ -66,8 +69,7 @@ def test_failsafes_trigger_and_clear(tmp_path):
 
     changes = [e["reasons"] for e in read_jsonl(out / "events.jsonl") if e["type"] == "failsafe"]
     assert {"rangefinder 6", "GPS lost", "GPS lost too long", "vehicle link", "GCS lost"} <= {r for c in changes for r in c}
-    # The GCS failsafe ages heartbeats in vehicle time: it fired only while our heartbeat was off,
-    # although lockstep runs several times faster than the wall clock the heartbeat is paced by.
+    # It fired once, while our heartbeat was off.
     assert sum("GCS lost" in b and "GCS lost" not in a for a, b in zip([[]] + changes, changes)) == 1
     assert collisions == 0
     # While the vehicle link was quiet every override the daemon sent was neutral.
