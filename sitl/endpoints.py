@@ -8,6 +8,7 @@ main loop ``select``s on :meth:`Endpoint.fds` and calls :meth:`Endpoint.poll` on
 
 from __future__ import annotations
 
+import errno
 import os
 import socket
 import tty
@@ -31,6 +32,15 @@ COMPONENT_ID = 1
 
 class EndpointError(Exception):
     """An endpoint could not be opened; the message is one line naming the endpoint."""
+
+
+class EndpointBusy(EndpointError):
+    """Its address is in use by another socket: the same endpoint on another port may open."""
+
+
+def _bind_error(url: str, what: str, address: tuple[str, int], exc: OSError) -> EndpointError:
+    kind = EndpointBusy if exc.errno == errno.EADDRINUSE else EndpointError
+    return kind(f"endpoint {url!r}: cannot {what} {address[0]}:{address[1]}: {exc.strerror}")
 
 
 def _parser():
@@ -207,7 +217,7 @@ class UdpEndpoint(Endpoint):
                 self.sock.bind(address)
         except OSError as exc:
             self.sock.close()
-            raise EndpointError(f"endpoint {url!r}: cannot bind {address[0]}:{address[1]}: {exc.strerror}") from None
+            raise _bind_error(url, "bind", address, exc) from None
         self.destinations: dict[tuple[str, int], _Peer] = {}
         if not listen:
             self.destinations[address] = _Peer(self.sock.fileno(), None, address)
@@ -252,7 +262,7 @@ class TcpListenEndpoint(Endpoint):
             self.listener.bind(address)
         except OSError as exc:
             self.listener.close()
-            raise EndpointError(f"endpoint {url!r}: cannot listen on {address[0]}:{address[1]}: {exc.strerror}") from None
+            raise _bind_error(url, "listen on", address, exc) from None
         self.listener.listen(4)
         self.listener.setblocking(False)
 

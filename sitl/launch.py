@@ -45,8 +45,23 @@ CLIENT_SCHEME = {"tcpin": "tcp", "tcp": "tcpin", "udpin": "udpout", "udpout": "u
 """The client-side pymavlink scheme for each emulator endpoint scheme."""
 
 
+PORT_BUSY_EXIT = 69
+"""The emulator's exit status when an endpoint's port is in use (``sitl.main.EXIT_UNAVAILABLE``)."""
+START_ATTEMPTS = 3
+"""Starts on a freshly picked port when the last one was taken between picking and binding."""
+
+
 class SitlError(RuntimeError):
-    """The emulator did not start; one line."""
+    """The emulator did not start; one line. ``returncode``: its exit status if it exited."""
+
+    def __init__(self, message: str, returncode: int | None = None) -> None:
+        super().__init__(message)
+        self.returncode = returncode
+
+    @property
+    def port_busy(self) -> bool:
+        """It exited because a port it was to bind is in use: another port may do."""
+        return self.returncode == PORT_BUSY_EXIT
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
@@ -171,7 +186,7 @@ class SitlProcess:
         if self._ready.wait(timeout_s) and not self._ended.is_set():
             return
         self.stop()
-        raise SitlError(f"{self.name} did not start (exit {self.returncode}): {self.last_error()}")
+        raise SitlError(f"{self.name} did not start (exit {self.returncode}): {self.last_error()}", self.returncode)
 
     def wait(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
         """Wait for the emulator to exit by itself (``--duration-s``, a kill); kill it after ``timeout_s``."""
@@ -201,15 +216,24 @@ class SitlProcess:
 def start(*flags: str, endpoints: list[str] | None = None, stdout_path: Path | None = None,
           stderr_path: Path | None = None, start_timeout_s: float = START_TIMEOUT_S) -> SitlProcess:  # fmt: skip
     """Start ``python -m sitl *flags`` with ``endpoints`` (default: one tcpin on a free loopback
-    port; none with ``--pty``) and wait for its ready line."""
-    if endpoints is None:
-        endpoints = [] if "--pty" in flags else [f"tcpin:127.0.0.1:{free_port(socket.SOCK_STREAM)}"]
-    argv = [sys.executable, "-m", "sitl", *flags]
-    for endpoint in endpoints:
-        argv += ["--endpoint", endpoint]
-    sitl = SitlProcess(argv, list(endpoints), stdout_path, stderr_path)
-    sitl.wait_ready(start_timeout_s)
-    return sitl
+    port, picked again if it is taken before the emulator binds it; none with ``--pty``) and wait
+    for its ready line."""
+    pick = endpoints is None and "--pty" not in flags
+    attempt = 1
+    while True:
+        if pick:
+            endpoints = [f"tcpin:127.0.0.1:{free_port(socket.SOCK_STREAM)}"]
+        argv = [sys.executable, "-m", "sitl", *flags]
+        for endpoint in endpoints or []:
+            argv += ["--endpoint", endpoint]
+        sitl = SitlProcess(argv, list(endpoints or []), stdout_path, stderr_path)
+        try:
+            sitl.wait_ready(start_timeout_s)
+            return sitl
+        except SitlError as exc:
+            if not (pick and exc.port_busy) or attempt == START_ATTEMPTS:
+                raise
+            attempt += 1
 
 
 @contextmanager

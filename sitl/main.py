@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 from sitl.clock import FrameClock, LockstepMarker, Pacer
-from sitl.endpoints import Endpoint, EndpointError, PtyEndpoint, mavlink, open_endpoint
+from sitl.endpoints import Endpoint, EndpointBusy, EndpointError, PtyEndpoint, mavlink, open_endpoint
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
 from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine
 from sitl.mavlink_vehicle import PARAM_NAMES, LinkParams, MavlinkVehicle
@@ -30,6 +30,9 @@ from sitl.world import Home, World, WorldError, load_world, scatter_obstacles
 
 PROG = "rover-sitl"
 DEFAULT_ENDPOINT = "tcpin:127.0.0.1:5760"
+EXIT_UNAVAILABLE = 69
+"""sysexits EX_UNAVAILABLE, as ``rover-ctl run``: an endpoint's port is in use (a launcher that
+picked it free may pick another and start again)."""
 """ArduPilot SITL's SERIAL0 port, where the daemon connects by default."""
 DEFAULT_HOME = Home(-35.363261, 149.165230, 584.0, 0.0)
 """ArduPilot's CMAC field, the default home of ArduPilot's own SITL."""
@@ -432,7 +435,7 @@ def main(argv: list[str] | None = None) -> int:
         for endpoint in endpoints:
             endpoint.close()
         print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_UNAVAILABLE if isinstance(exc, EndpointBusy) else 2
 
     emulator = Emulator(rover, vehicle, endpoints, clock, args.lockstep, args.speedup, truth, args.seed)
     emulator.install_signals()

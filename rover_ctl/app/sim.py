@@ -54,6 +54,7 @@ from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
 from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
+from sitl.launch import START_ATTEMPTS as SITL_START_ATTEMPTS  # noqa: E402
 from sitl.launch import SitlError, SitlProcess, free_port, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
 
@@ -297,14 +298,7 @@ class SimRun:
         if self.options.signing_key is not None:
             self._key_dir = tempfile.mkdtemp(prefix="rover-ctl-sim-")
             KeyStore(self.signing_key_path).save_key(self.options.signing_key)
-        endpoints = [f"udpin:127.0.0.1:{self.watch_port}"]
-        if not self.options.line_baud:  # else the daemon's vehicle link is the emulator's pty
-            endpoints.insert(0, f"tcpin:127.0.0.1:{self.vehicle_port}")
-        try:
-            self.sitl = start_sitl(*self._sitl_flags(), endpoints=endpoints, stdout_path=self.out / "sitl.out",
-                                   stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
-        except SitlError as exc:
-            raise SimError(str(exc)) from None
+        self._start_sitl()
         self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
@@ -320,6 +314,23 @@ class SimRun:
                 self.gcs_port = free_port(socket.SOCK_DGRAM)
                 self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
         self.gcs.upload(self.mission)
+
+    def _start_sitl(self) -> None:
+        """The emulator, started again on new ports (up to ``SITL_START_ATTEMPTS``) when one picked free
+        was taken before it bound it."""
+        for attempt in range(1, SITL_START_ATTEMPTS + 1):
+            endpoints = [f"udpin:127.0.0.1:{self.watch_port}"]
+            if not self.options.line_baud:  # else the daemon's vehicle link is the emulator's pty
+                endpoints.insert(0, f"tcpin:127.0.0.1:{self.vehicle_port}")
+            try:
+                self.sitl = start_sitl(*self._sitl_flags(), endpoints=endpoints, stdout_path=self.out / "sitl.out",
+                                       stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
+                return
+            except SitlError as exc:
+                if not exc.port_busy or attempt == SITL_START_ATTEMPTS:
+                    raise SimError(str(exc)) from None
+                self.vehicle_port = free_port(socket.SOCK_STREAM)
+                self.watch_port = free_port(socket.SOCK_DGRAM)
 
     def _start_daemon(self) -> None:
         daemon_log = open(self.daemon_output, "w")

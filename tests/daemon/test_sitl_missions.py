@@ -126,6 +126,24 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     assert overrides[-2:] == [(0, 0), (1500, 1500)] and overrides.count((0, 0)) == 1
 
 
+def test_emulator_ports_taken_before_it_binds_them_are_replaced(tmp_path):
+    """The same race for the emulator's ports (vehicle link and watcher): it exits 69 and the run
+    starts it again on new ones."""
+    import socket
+
+    run = SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0))
+    taken = run.vehicle_port, run.watch_port
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as vehicle_thief, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as watch_thief:  # fmt: skip
+        vehicle_thief.bind(("127.0.0.1", taken[0]))
+        vehicle_thief.listen(1)
+        watch_thief.bind(("127.0.0.1", taken[1]))
+        with run:
+            assert run.vehicle_port != taken[0] and run.watch_port != taken[1]
+            assert run.sitl.poll() is None and run.daemon.poll() is None
+            assert "SYSID_THISMAV" in download_params(run)  # the mission went up and the daemon answers
+
+
 def test_a_gcs_port_taken_before_the_daemon_binds_it_is_replaced(tmp_path):
     """`rover-ctl sim` picks the daemon's GCS port free, then the daemon binds it: a process beside
     it (a second simulation) can take it in between. The daemon then exits 69 (a link could not be

@@ -26,8 +26,8 @@ def run_sitl(*flags: str, timeout_s: float = 20.0) -> subprocess.CompletedProces
     return subprocess.run([sys.executable, "-m", "sitl", *flags], capture_output=True, text=True, timeout=timeout_s)
 
 
-def one_error_line(result: subprocess.CompletedProcess) -> str:
-    assert result.returncode == 2, result
+def one_error_line(result: subprocess.CompletedProcess, status: int = 2) -> str:
+    assert result.returncode == status, result
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("rover-sitl: error: "), result.stderr
     return lines[0]
@@ -71,12 +71,18 @@ def test_bad_world_files_name_the_file(capsys, tmp_path) -> None:
     assert str(bad_feature) in main_error_line(capsys, "--world", str(bad_feature))
 
 
-def test_port_in_use_is_an_error() -> None:
+def test_port_in_use_is_an_error_a_launcher_can_tell_apart() -> None:
+    """One line, and exit status 69 (EX_UNAVAILABLE) rather than 2: another port may do."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen(1)
         port = busy.getsockname()[1]
-        line = one_error_line(run_sitl("--endpoint", f"tcpin:127.0.0.1:{port}", "--duration-s", "0"))
+        line = one_error_line(run_sitl("--endpoint", f"tcpin:127.0.0.1:{port}", "--duration-s", "0"), status=69)
+    assert f"127.0.0.1:{port}" in line and "in use" in line
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        port = busy.getsockname()[1]
+        line = one_error_line(run_sitl("--endpoint", f"udpin:127.0.0.1:{port}", "--duration-s", "0"), status=69)
     assert f"127.0.0.1:{port}" in line and "in use" in line
 
 
