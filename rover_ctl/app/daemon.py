@@ -46,8 +46,9 @@ from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelD
 from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.mavlink import budget
 from rover_ctl.mavlink.budget import StreamPlan
+from rover_ctl.mavlink.commands import ACK_LATER
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
-from rover_ctl.mavlink.vehicle import PYMAVLINK_DEFAULT_BAUD, Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.vehicle import NO_ANSWER, PYMAVLINK_DEFAULT_BAUD, Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
 from rover_ctl.mavlink.signing import KeyStore
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
@@ -386,7 +387,14 @@ class Daemon:
         return VehicleState(s.armed, int(s.mode), s.system_status, s.home, int(s.mission_state))
 
     def arm(self, arm: bool, force: bool) -> int:
-        return self._request(self.autopilot.arm(arm, force))
+        """The autopilot's checks decide whether the request goes to the vehicle; if it does, the
+        vehicle's answer is the ground station's (``_on_arm_result``): its own checks may refuse."""
+        reply = self.autopilot.arm(arm, force)
+        events = self.autopilot.drain()
+        self._apply(events)
+        if reply.accepted and any(isinstance(e, ArmRequest) for e in events):
+            return ACK_LATER
+        return reply.result
 
     def set_mode(self, custom_mode: int) -> int:
         return self._request(self.autopilot.set_mode(custom_mode))
@@ -455,10 +463,13 @@ class Daemon:
 
     def _on_arm_result(self, result) -> None:
         if not result.accepted:
-            text = f"Vehicle refused arming/disarming (result {result.result})"
+            unanswered = result.result == NO_ANSWER
+            text = ("Vehicle did not answer arming/disarming" if unanswered else
+                    f"Vehicle refused arming/disarming (result {result.result})")  # fmt: skip
             log.warning("%s", text)
             self.events.write(self._now(), "statustext", text=text, severity=int(Severity.WARNING))
             self.gcs.send_statustext(text, mav.MAV_SEVERITY_WARNING)
+        self.gcs.command_result(result.command, mav.MAV_RESULT_FAILED if result.result == NO_ANSWER else result.result)
 
     def _send_command(self, out: StepOutput) -> None:
         if out.command is RELEASE:

@@ -1,6 +1,7 @@
 """The command microservice on the GCS link: COMMAND_LONG / COMMAND_INT and SET_MODE.
 
-Each command is answered with COMMAND_ACK to its sender: arm/disarm, DO_SET_MODE, MISSION_START,
+Each command is answered with COMMAND_ACK to its sender (arm/disarm once the vehicle has answered
+it, as ArduPilot answers with the outcome of its own arming checks): arm/disarm, DO_SET_MODE, MISSION_START,
 NAV_RETURN_TO_LAUNCH, DO_SET_MISSION_CURRENT, DO_REPOSITION (a GUIDED destination: COMMAND_INT x/y
 in degE7, COMMAND_LONG param5/6 in degrees; param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE switches
 to GUIDED), REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES (AUTOPILOT_VERSION, HOME_POSITION),
@@ -18,6 +19,12 @@ from rover_ctl.mission.model import Home
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, mav
 
 HANDLED = ("COMMAND_LONG", "COMMAND_INT", "SET_MODE")
+ACK_LATER = -1
+"""What a handler returns when the answer is not its own to give yet (arming: the vehicle decides);
+the ACK goes out when ``CommandService.answer`` is called with the result."""
+MAX_WAITING_SENDERS = 8
+"""Ground stations waiting for one command's deferred ACK (a retransmission from the same sender
+counts once; beyond this the oldest is dropped: a flood of senders cannot grow the table)."""
 CAPABILITIES = (
     mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
@@ -64,6 +71,8 @@ class CommandService:
         self.mission = mission
         self.telemetry = telemetry
         self.home = home
+        self.waiting: dict[int, list[tuple[int, int]]] = {}
+        """Command -> senders waiting for its deferred ACK, oldest first."""
 
     def handle(self, msg) -> None:
         if msg.get_type() == "SET_MODE":
@@ -97,9 +106,20 @@ class CommandService:
             result = self.telemetry.set_interval(int(msg.param1), msg.param2)
         else:
             result = mav.MAV_RESULT_UNSUPPORTED
+        if result == ACK_LATER:
+            senders = self.waiting.setdefault(command, [])
+            if sender not in senders:
+                senders.append(sender)
+                del senders[:-MAX_WAITING_SENDERS]
+            return
         self.conn.mav.send(mav.MAVLink_command_ack_message(command, result, 0, 0, sender[0], sender[1]))
         if followup is not None:
             self.conn.mav.send(followup)
+
+    def answer(self, command: int, result: int) -> None:
+        """The deferred ACK of ``command``, to every sender waiting for it (none: nothing)."""
+        for system, component in self.waiting.pop(command, ()):
+            self.conn.mav.send(mav.MAVLink_command_ack_message(command, result, 0, 0, system, component))
 
     def _reposition(self, msg) -> int:
         if msg.get_type() == "COMMAND_INT":

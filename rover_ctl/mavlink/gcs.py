@@ -18,7 +18,8 @@ station gets, with the tested clients):
 The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT is an int):
 
     state() -> VehicleState                 armed, custom_mode, system_status, home, mission_state
-    arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: ARM_FORCE_MAGIC)
+    arm(arm: bool, force: bool) -> int      MAV_CMD_COMPONENT_ARM_DISARM (force: ARM_FORCE_MAGIC);
+                                            ACK_LATER: acknowledged by ``command_result`` later
     set_mode(custom_mode: int) -> int       DO_SET_MODE / SET_MODE (RoverMode numbers)
     mission_start() -> int                  MAV_CMD_MISSION_START
     return_to_launch() -> int               MAV_CMD_NAV_RETURN_TO_LAUNCH
@@ -333,6 +334,10 @@ class GcsLink:
 
     def send_sys_status(self, now_s: float, voltage_v: float, remaining_pct: int, **bits: int) -> bool:
         return self.telemetry.send_sys_status(now_s, voltage_v, remaining_pct, **bits)
+
+    def command_result(self, command: int, result: int) -> None:
+        """The ACK of a command its handler deferred (``commands.ACK_LATER``), to its senders."""
+        self.commands.answer(command, result)
 
     def send_statustext(self, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
         self.telemetry.send_statustext(text, severity)

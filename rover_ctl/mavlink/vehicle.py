@@ -72,6 +72,8 @@ WRONG_BAUD_BYTES = 4096
 """Bytes received without a single MAVLink frame after which a serial line is called wrong (at
 57600 a vehicle sends that in well under two seconds)."""
 PYMAVLINK_DEFAULT_BAUD = 115200
+NO_ANSWER = -1
+"""``CommandResult.result`` of a command no COMMAND_ACK answered after all retries."""
 
 
 class LinkError(RuntimeError):
@@ -150,7 +152,7 @@ class Battery:
 class CommandResult:
     command: int
     result: int
-    """MAV_RESULT, or -1 when no ACK came after all retries."""
+    """MAV_RESULT, or NO_ANSWER when no ACK came after all retries."""
 
     @property
     def accepted(self) -> bool:
@@ -513,7 +515,7 @@ class VehicleLink:
             if pending.attempts > self.command_retries:
                 del self._pending[pending.command]
                 if pending.on_result:
-                    pending.on_result(CommandResult(pending.command, -1))
+                    pending.on_result(CommandResult(pending.command, NO_ANSWER))
                 continue
             self._send_command(pending, now)
 
@@ -622,7 +624,7 @@ class VehicleLink:
         while not results:
             if self._wall() > deadline:
                 self._pending.pop(command, None)
-                return CommandResult(command, -1)
+                return CommandResult(command, NO_ANSWER)
             self._pump(0.02)
         return results[0]
 

@@ -23,10 +23,11 @@ What differs from the SITL run, and why it does not change the outcome beyond th
 test (tests/tune/test_episode.py) states:
 - streams are sent when each sensor is sampled (the emulator sends the newest sample on a stream
   grid that starts when the daemon asks for its rates: the same readings, up to one frame later);
-- the ground station is this loop: it arms as soon as the autopilot's pre-arm checks pass and
-  starts the mission at once (``rover-ctl sim`` retries arming every 0.2 wall seconds, which in
-  lockstep is a variable number of sim seconds); the vehicle's armed flag reaches the autopilot
-  with the next 1 Hz heartbeat, as it does over the wire;
+- the ground station is this loop: it arms as soon as the autopilot's and the vehicle's pre-arm
+  checks pass (asking again at each step) and starts the mission at once (``rover-ctl sim``
+  retries arming every 0.2 wall seconds, which in lockstep is a variable number of sim seconds);
+  the vehicle's armed flag reaches the autopilot with the next 1 Hz heartbeat, as it does over
+  the wire;
 - measured link rates are the emulator's stream rates (the daemon measures them).
 
 ``start_s``: the ground station arms and starts the mission no earlier than this sim time (a
@@ -314,8 +315,11 @@ class Episode:
         if pose is None or self.auto_start_s is not None or t_s + 1e-9 < self.start_s:
             return
         if not self.arm_sent:
-            self.arm_sent = ap.arm(True).accepted
+            accepted = ap.arm(True).accepted
             self._events(ap.drain(), t_s)
+            # The vehicle answers at once here; a refusal (no 3D fix at that instant) is asked
+            # again at the next step, as rover-ctl sim asks again on a refused COMMAND_ACK.
+            self.arm_sent = accepted and self.vehicle.armed
             if not self.arm_sent:
                 return
         if ap.mission_start().accepted:

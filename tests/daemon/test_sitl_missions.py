@@ -126,6 +126,26 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     assert overrides[-2:] == [(0, 0), (1500, 1500)] and overrides.count((0, 0)) == 1
 
 
+def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
+    """Arming that passes the daemon's checks goes on to the vehicle, whose own checks decide:
+    rover-sitl, like ArduPilot, refuses without a 3D fix. The ground station's COMMAND_ACK is the
+    vehicle's answer (it was ACCEPTED as soon as the daemon forwarded the request, and the rover
+    stayed disarmed in AUTO with nothing to retry on); with the fix back the same command arms."""
+    from rover_ctl.vocabulary import mav
+
+    with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0)) as run:
+        assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # the rangefinders known
+        run.sitl_param("SIM_GPS_DISABLE", 1)
+        assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False  # the vehicle's fix is gone
+        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_FAILED
+        assert any(t.startswith("Vehicle refused arming") for t in run.progress.texts)
+        run.sitl_param("SIM_GPS_DISABLE", 0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False
+        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED
+        assert run.wait_for(lambda p: p.armed, wall_timeout_s=10.0)
+
+
 def test_emulator_ports_taken_before_it_binds_them_are_replaced(tmp_path):
     """The same race for the emulator's ports (vehicle link and watcher): it exits 69 and the run
     starts it again on new ones."""
