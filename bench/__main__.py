@@ -10,7 +10,9 @@ kept from the last run, each row dated); ``--variants paper,default`` runs only 
 (likewise keeping the other rows); ``--rulebase FILE`` compares a rule base file (a
 ``rover-ctl tune`` result) with default in a table of its own (``navigation_rulebase.json``);
 ``--scheduler tcp://HOST:8786`` runs the worlds as tasks on a Dask cluster whose workers run from
-a checkout of this tree (docs/tuning.md, "On a cluster").
+a checkout of this tree (docs/tuning.md, "On a cluster"). Ctrl-C or SIGTERM stops a run: the
+benchmark in progress stops its emulators and daemons (the navigation benchmark's worlds run on
+threads: ``SimRun.cancelled``) and nothing is written.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import argparse
 import importlib
 import json
 import platform
+import signal
 import sys
 import time
 from pathlib import Path
@@ -42,6 +45,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rulebase", metavar="FILE", help="navigation: this rule base file against default, in a table of its own")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="navigation: run the worlds as tasks on this Dask cluster (tcp://HOST:8786)")
     args = parser.parse_args(argv)
+    # SIGTERM (a CI timeout, `timeout`) unwinds like Ctrl-C, so each benchmark stops its children;
+    # the handler it replaces is put back (tests call main in their own process).
+    previous = signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    try:
+        return _run(parser, args)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     names = args.names or available()
     unknown = sorted(set(names) - set(available()))
     if unknown:

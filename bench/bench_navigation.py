@@ -37,7 +37,7 @@ from rover_ctl.navigation.planner import Circle, Planner
 from rover_ctl.tuning.scenarios import HOME, Scenario, scenarios, world_doc
 from rover_ctl.tuning.scenarios import mission as scenario_mission
 from rover_ctl.app.report import read_jsonl
-from rover_ctl.app.sim import SimError, SimOptions, simulate
+from rover_ctl.app.sim import SimError, SimOptions, SimRun, simulate
 
 VARIANTS = {
     "paper": ("paper", []),
@@ -218,7 +218,12 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
         runs = _on_cluster(scheduler, jobs, variants)
     else:
         with tempfile.TemporaryDirectory(prefix="bench_nav_") as tmp, ThreadPoolExecutor(WORKERS) as pool:
-            runs = list(pool.map(lambda job: one_run(*job, Path(tmp), variants), jobs))
+            try:
+                runs = list(pool.map(lambda job: one_run(*job, Path(tmp), variants), jobs))
+            except BaseException:  # Ctrl-C, SIGTERM: drop the queued worlds, stop the running ones' children
+                pool.shutdown(wait=False, cancel_futures=True)
+                SimRun.cancelled.set()
+                raise
     today = time.strftime("%Y-%m-%d")
     fresh = []
     for name in counts:

@@ -36,6 +36,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -359,7 +360,14 @@ class SimRun:
         self.daemon_output.parent.mkdir(parents=True, exist_ok=True)
         self._start_daemon()
 
+    cancelled = threading.Event()
+    """Set, every run of this process gives up at its next check (SimError) and stops its
+    children: how a program running several on threads (the navigation benchmark) stops them all
+    on Ctrl-C or SIGTERM, which only its main thread receives."""
+
     def _check_children(self) -> None:
+        if SimRun.cancelled.is_set():
+            raise SimError("cancelled")
         if self.sitl is not None and self.sitl.poll() is not None:
             raise SimError(f"rover-sitl exited with status {self.sitl.returncode}: {self.sitl.last_error()}")
         if self.daemon is not None and self.daemon.poll() is not None:

@@ -13,7 +13,7 @@ from pymavlink import mavutil
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.app.report import read_jsonl
 from rover_ctl.app.sim import SimOptions, SimRun, simulate
-from rover_ctl.vocabulary import RoverMode
+from rover_ctl.vocabulary import MissionState, RoverMode
 
 ROOT = Path(__file__).resolve().parents[2]
 JUMP = ROOT / "missions" / "cmac_jump.waypoints"
@@ -144,6 +144,41 @@ def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
         assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED
         assert run.wait_for(lambda p: p.armed, wall_timeout_s=10.0)
+
+
+def test_cancelling_stops_runs_on_other_threads_and_their_children(tmp_path):
+    """A program running several simulations on threads (the navigation benchmark) gets Ctrl-C or
+    SIGTERM on its main thread only: SimRun.cancelled makes every run give up at its next check
+    and stop its emulator and daemon (they outlived a killed benchmark)."""
+    import threading
+
+    runs: list[SimRun] = []
+    errors: list[Exception] = []
+
+    def drive() -> None:
+        try:
+            with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=600.0)) as run:
+                runs.append(run)
+                run.arm()
+                run.start_mission()
+                run.wait_for(lambda p: p.mission_state == MissionState.COMPLETE, wall_timeout_s=60.0)
+        except Exception as exc:  # noqa: BLE001 - the test looks at it
+            errors.append(exc)
+
+    worker = threading.Thread(target=drive)
+    worker.start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while not runs and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert runs, "the run did not start"
+        SimRun.cancelled.set()
+        worker.join(30.0)
+    finally:
+        SimRun.cancelled.clear()
+    assert not worker.is_alive()
+    assert [str(e) for e in errors] == ["cancelled"]
+    assert runs[0].sitl.poll() is not None and runs[0].daemon.poll() is not None
 
 
 def test_emulator_ports_taken_before_it_binds_them_are_replaced(tmp_path):
