@@ -1,7 +1,7 @@
 """The command microservice on the GCS link: COMMAND_LONG / COMMAND_INT and SET_MODE.
 
-Each command is answered with COMMAND_ACK to its sender (arm/disarm once the vehicle has answered
-it, as ArduPilot answers with the outcome of its own arming checks): arm/disarm, DO_SET_MODE, MISSION_START,
+Each command is answered with COMMAND_ACK to its sender: arm/disarm (once the vehicle has answered
+it, as ArduPilot's ACK carries the outcome of its own arming checks), DO_SET_MODE, MISSION_START,
 NAV_RETURN_TO_LAUNCH, DO_SET_MISSION_CURRENT, DO_REPOSITION (a GUIDED destination: COMMAND_INT x/y
 in degE7, COMMAND_LONG param5/6 in degrees; param2's MAV_DO_REPOSITION_FLAGS_CHANGE_MODE switches
 to GUIDED), REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES (AUTOPILOT_VERSION, HOME_POSITION),
