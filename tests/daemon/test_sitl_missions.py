@@ -128,9 +128,10 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
 
 def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
     """Arming that passes the daemon's checks goes on to the vehicle, whose own checks decide:
-    rover-sitl refuses without a 3D fix (ARMING_CHECK 1), ArduPilot on its pre-arm checks. The ground station's COMMAND_ACK is the
-    vehicle's answer (it was ACCEPTED as soon as the daemon forwarded the request, and the rover
-    stayed disarmed in AUTO with nothing to retry on); with the fix back the same command arms."""
+    rover-sitl refuses without a 3D fix (ARMING_CHECK 1), ArduPilot on its pre-arm checks. The
+    ground station's COMMAND_ACK is the vehicle's answer (it was ACCEPTED as soon as the daemon
+    forwarded the request, and the rover stayed disarmed in AUTO with nothing to retry on); with
+    the fix back the same command arms."""
     from rover_ctl.vocabulary import mav
 
     with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0)) as run:
