@@ -309,6 +309,10 @@ class GcsParams:
     """Default SYS_STATUS rate to the GCS."""
     mission_current_rate_hz: float = 1.0
     """Default MISSION_CURRENT rate to the GCS."""
+    vehicle_text_severity: int = 4
+    """The vehicle's STATUSTEXTs this urgent or more (MAV_SEVERITY: 0 emergency .. 7 debug; 4 =
+    WARNING) are passed on to the ground stations as the vehicle said them: behind the daemon the
+    autopilot's own reasons ("PreArm: ...", ArduPilot's CRITICAL) reach nobody else. -1: none."""
     param_send_rate_hz: float = 50.0
     """PARAM_VALUE messages per second while answering PARAM_REQUEST_LIST (about 2.5 kB/s, under
     half of a 57600 baud telemetry radio)."""

@@ -332,6 +332,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("gcs.attitude_rate_hz", "GCS_ATT_RATE", 0.0, 50.0, START, {}),
     ("gcs.sys_status_rate_hz", "GCS_SYS_RATE", 0.0, 50.0, START, {}),
     ("gcs.mission_current_rate_hz", "GCS_MCUR_RATE", 0.0, 50.0, START, {}),
+    ("gcs.vehicle_text_severity", "GCS_VEH_TEXT_SEV", -1, 7, START, {}),
     ("gcs.client_retry_s", "CLI_RETRY", 0.05, 60.0, CONFIG, {}),
     ("gcs.client_retries", "CLI_RETRIES", 0, 1000, CONFIG, {}),
     ("gcs.client_connect_timeout_s", "CLI_CONN_TIMEOUT", 0.1, 600.0, CONFIG, {}),

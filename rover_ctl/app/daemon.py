@@ -360,6 +360,8 @@ class Daemon:
         elif isinstance(item, VehicleText):
             log.info("vehicle: %s", item.text)
             self.events.write(item.time_s, "statustext", text=item.text, severity=item.severity, source="vehicle")
+            if item.severity <= self.config.gcs.vehicle_text_severity:
+                self.gcs.send_statustext(item.text, item.severity)
 
     def _set_home(self, fix: GpsFix) -> None:
         self.home = Home(fix.lat_deg, fix.lon_deg, fix.alt_m)

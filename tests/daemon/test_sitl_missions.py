@@ -141,6 +141,8 @@ def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
         assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False  # the vehicle's fix is gone
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_FAILED
         assert any(t.startswith("Vehicle refused arming") for t in run.progress.texts)
+        # The vehicle's own reason is passed on (CRITICAL, as ArduPilot sends its PreArm texts).
+        assert run.wait_for(lambda p: "PreArm: GPS 1: Bad fix" in p.texts, wall_timeout_s=5.0)
         run.sitl_param("SIM_GPS_DISABLE", 0)
         assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED
