@@ -77,6 +77,28 @@ def client_url(endpoint: str) -> str:
     return f"{CLIENT_SCHEME[scheme]}:{rest}"
 
 
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """Hold Ctrl-C and SIGTERM while a child process is created and recorded, then deliver them.
+
+    Either one unwinds the launcher (KeyboardInterrupt, or SystemExit from a handler) wherever it
+    lands; landing inside ``subprocess.Popen`` after the fork, it unwinds before the caller has the
+    Popen to stop, and the child outlives the launcher. Only the main thread receives signals (and
+    may set handlers): elsewhere this does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: caught.append(signum)) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        for sig in caught:
+            signal.raise_signal(sig)
+
+
 def stop_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout_s: float = STOP_TIMEOUT_S) -> int:
     """Send ``sig``, wait up to ``timeout_s``, then kill. Returns the exit status."""
     if proc.poll() is None:
@@ -226,14 +248,20 @@ def start(*flags: str, endpoints: list[str] | None = None, stdout_path: Path | N
         argv = [sys.executable, "-m", "sitl", *flags]
         for endpoint in endpoints or []:
             argv += ["--endpoint", endpoint]
-        sitl = SitlProcess(argv, list(endpoints or []), stdout_path, stderr_path)
+        sitl: SitlProcess | None = None
         try:
+            with signals_held():  # delivered once ``sitl`` is known, so the handler below stops it
+                sitl = SitlProcess(argv, list(endpoints or []), stdout_path, stderr_path)
             sitl.wait_ready(start_timeout_s)
             return sitl
         except SitlError as exc:
             if not (pick and exc.port_busy) or attempt == START_ATTEMPTS:
                 raise
             attempt += 1
+        except BaseException:  # Ctrl-C, SIGTERM: the caller never gets it to stop
+            if sitl is not None:
+                sitl.stop()
+            raise
 
 
 @contextmanager

@@ -56,7 +56,7 @@ from rover_ctl.mission.model import Mission  # noqa: E402
 from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
 from sitl.launch import START_ATTEMPTS as SITL_START_ATTEMPTS  # noqa: E402
-from sitl.launch import SitlError, SitlProcess, free_port, stop_process  # noqa: E402
+from sitl.launch import SitlError, SitlProcess, free_port, signals_held, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
@@ -336,7 +336,8 @@ class SimRun:
     def _start_daemon(self) -> None:
         daemon_log = open(self.daemon_output, "w")
         self._logs.append(daemon_log)
-        self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
+        with signals_held():  # stop() must know it whenever Ctrl-C or SIGTERM comes
+            self.daemon = subprocess.Popen(self._daemon_command(), stdout=daemon_log, stderr=subprocess.STDOUT)
 
     def _connect_gcs(self) -> None:
         """Our GCS connection, once the daemon heartbeats on its GCS link."""
