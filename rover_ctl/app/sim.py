@@ -317,8 +317,8 @@ class SimRun:
         self.gcs.upload(self.mission)
 
     def _start_sitl(self) -> None:
-        """The emulator, started again on new ports (up to ``SITL_START_ATTEMPTS``) when one picked free
-        was taken before it bound it."""
+        """The emulator, started again on new ports (up to ``SITL_START_ATTEMPTS``) when one picked
+        free was taken before it bound it."""
         for attempt in range(1, SITL_START_ATTEMPTS + 1):
             endpoints = [f"udpin:127.0.0.1:{self.watch_port}"]
             if not self.options.line_baud:  # else the daemon's vehicle link is the emulator's pty
