@@ -19,6 +19,7 @@ a pty) the same way.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -26,7 +27,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
@@ -45,10 +46,8 @@ CLIENT_SCHEME = {"tcpin": "tcp", "tcp": "tcpin", "udpin": "udpout", "udpout": "u
 """The client-side pymavlink scheme for each emulator endpoint scheme."""
 
 
-PORT_BUSY_EXIT = 69
-"""The emulator's exit status when an endpoint's port is in use (``sitl.main.EXIT_UNAVAILABLE``)."""
 START_ATTEMPTS = 3
-"""Starts on a freshly picked port when the last one was taken between picking and binding."""
+"""Starts on freshly picked ports when one was taken between picking and binding."""
 
 
 class SitlError(RuntimeError):
@@ -61,7 +60,7 @@ class SitlError(RuntimeError):
     @property
     def port_busy(self) -> bool:
         """It exited because a port it was to bind is in use: another port may do."""
-        return self.returncode == PORT_BUSY_EXIT
+        return self.returncode == os.EX_UNAVAILABLE  # sitl.main's exit status for it
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
@@ -235,29 +234,34 @@ class SitlProcess:
             pump.join(STOP_TIMEOUT_S)
 
 
-def start(*flags: str, endpoints: list[str] | None = None, stdout_path: Path | None = None,
-          stderr_path: Path | None = None, start_timeout_s: float = START_TIMEOUT_S) -> SitlProcess:  # fmt: skip
-    """Start ``python -m sitl *flags`` with ``endpoints`` (default: one tcpin on a free loopback
-    port, picked again if it is taken before the emulator binds it; none with ``--pty``) and wait
-    for its ready line."""
-    pick = endpoints is None and "--pty" not in flags
+def start(*flags: str, endpoints: list[str] | None = None, repick: Callable[[], list[str]] | None = None,
+          stdout_path: Path | None = None, stderr_path: Path | None = None,
+          start_timeout_s: float = START_TIMEOUT_S) -> SitlProcess:  # fmt: skip
+    """Start ``python -m sitl *flags`` with ``endpoints`` and wait for its ready line.
+
+    ``repick`` gives new endpoints when the emulator exits because a port is in use (one picked
+    free was taken before it bound it): up to ``START_ATTEMPTS`` starts. Without ``endpoints``
+    (and without ``--pty``): one tcpin on a free loopback port, picked again so."""
+    if endpoints is None and repick is None and "--pty" not in flags:
+        repick = lambda: [f"tcpin:127.0.0.1:{free_port(socket.SOCK_STREAM)}"]  # noqa: E731
+    if endpoints is None:
+        endpoints = repick() if repick else []
     attempt = 1
     while True:
-        if pick:
-            endpoints = [f"tcpin:127.0.0.1:{free_port(socket.SOCK_STREAM)}"]
         argv = [sys.executable, "-m", "sitl", *flags]
-        for endpoint in endpoints or []:
+        for endpoint in endpoints:
             argv += ["--endpoint", endpoint]
         sitl: SitlProcess | None = None
         try:
             with signals_held():  # delivered once ``sitl`` is known, so the handler below stops it
-                sitl = SitlProcess(argv, list(endpoints or []), stdout_path, stderr_path)
+                sitl = SitlProcess(argv, list(endpoints), stdout_path, stderr_path)
             sitl.wait_ready(start_timeout_s)
             return sitl
         except SitlError as exc:
-            if not (pick and exc.port_busy) or attempt == START_ATTEMPTS:
+            if repick is None or not exc.port_busy or attempt == START_ATTEMPTS:
                 raise
             attempt += 1
+            endpoints = repick()
         except BaseException:  # Ctrl-C, SIGTERM: the caller never gets it to stop
             if sitl is not None:
                 sitl.stop()

@@ -30,9 +30,9 @@ from sitl.world import Home, World, WorldError, load_world, scatter_obstacles
 
 PROG = "rover-sitl"
 DEFAULT_ENDPOINT = "tcpin:127.0.0.1:5760"
-EXIT_UNAVAILABLE = 69
-"""sysexits EX_UNAVAILABLE, as ``rover-ctl run``: an endpoint's port is in use (a launcher that
-picked it free may pick another and start again)."""
+EXIT_UNAVAILABLE = os.EX_UNAVAILABLE
+"""69, as ``rover-ctl run``: an endpoint's port is in use (a launcher that picked it free may pick
+another and start again)."""
 """ArduPilot SITL's SERIAL0 port, where the daemon connects by default."""
 DEFAULT_HOME = Home(-35.363261, 149.165230, 584.0, 0.0)
 """ArduPilot's CMAC field, the default home of ArduPilot's own SITL."""

@@ -464,14 +464,16 @@ class Daemon:
             log.warning("%s: cannot save the mission's progress: %s", store.progress_path, exc)
 
     def _on_arm_result(self, result) -> None:
+        """The vehicle's answer to an arming or disarming: told, and acknowledged to the ground
+        stations that asked (FAILED when it gave none)."""
+        unanswered = result.result == NO_ANSWER
         if not result.accepted:
-            unanswered = result.result == NO_ANSWER
             text = ("Vehicle did not answer arming/disarming" if unanswered else
                     f"Vehicle refused arming/disarming (result {result.result})")  # fmt: skip
             log.warning("%s", text)
             self.events.write(self._now(), "statustext", text=text, severity=int(Severity.WARNING))
             self.gcs.send_statustext(text, mav.MAV_SEVERITY_WARNING)
-        self.gcs.command_result(result.command, mav.MAV_RESULT_FAILED if result.result == NO_ANSWER else result.result)
+        self.gcs.command_result(result.command, mav.MAV_RESULT_FAILED if unanswered else result.result)
 
     def _send_command(self, out: StepOutput) -> None:
         if out.command is RELEASE:

@@ -55,7 +55,6 @@ from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
 from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
-from sitl.launch import START_ATTEMPTS as SITL_START_ATTEMPTS  # noqa: E402
 from sitl.launch import SitlError, SitlProcess, free_port, signals_held, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
 
@@ -205,6 +204,11 @@ class Progress:
 class SimRun:
     """The emulator and the daemon as child processes plus our GCS and watcher connections."""
 
+    cancelled = threading.Event()
+    """Set, every run of this process gives up at its next check (SimError) and stops its
+    children: how a program running several on threads (the navigation benchmark) stops them all
+    on Ctrl-C or SIGTERM, which only its main thread receives."""
+
     def __init__(self, options: SimOptions):
         self.options = options
         self.out = Path(options.out)
@@ -317,21 +321,25 @@ class SimRun:
         self.gcs.upload(self.mission)
 
     def _start_sitl(self) -> None:
-        """The emulator, started again on new ports (up to ``SITL_START_ATTEMPTS``) when one picked
-        free was taken before it bound it."""
-        for attempt in range(1, SITL_START_ATTEMPTS + 1):
-            endpoints = [f"udpin:127.0.0.1:{self.watch_port}"]
-            if not self.options.line_baud:  # else the daemon's vehicle link is the emulator's pty
-                endpoints.insert(0, f"tcpin:127.0.0.1:{self.vehicle_port}")
-            try:
-                self.sitl = start_sitl(*self._sitl_flags(), endpoints=endpoints, stdout_path=self.out / "sitl.out",
-                                       stderr_path=self.out / "sitl.log", start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
-                return
-            except SitlError as exc:
-                if not exc.port_busy or attempt == SITL_START_ATTEMPTS:
-                    raise SimError(str(exc)) from None
-                self.vehicle_port = free_port(socket.SOCK_STREAM)
-                self.watch_port = free_port(socket.SOCK_DGRAM)
+        """The emulator, started again on new ports when one picked free was taken before it bound
+        it (``sitl.launch.start``)."""
+        try:
+            self.sitl = start_sitl(*self._sitl_flags(), endpoints=self._sitl_endpoints(), repick=self._new_sitl_ports,
+                                   stdout_path=self.out / "sitl.out", stderr_path=self.out / "sitl.log",
+                                   start_timeout_s=SITL_READY_TIMEOUT_S)  # fmt: skip
+        except SitlError as exc:
+            raise SimError(str(exc)) from None
+
+    def _sitl_endpoints(self) -> list[str]:
+        endpoints = [f"udpin:127.0.0.1:{self.watch_port}"]
+        if not self.options.line_baud:  # else the daemon's vehicle link is the emulator's pty
+            endpoints.insert(0, f"tcpin:127.0.0.1:{self.vehicle_port}")
+        return endpoints
+
+    def _new_sitl_ports(self) -> list[str]:
+        self.vehicle_port = free_port(socket.SOCK_STREAM)
+        self.watch_port = free_port(socket.SOCK_DGRAM)
+        return self._sitl_endpoints()
 
     def _start_daemon(self) -> None:
         daemon_log = open(self.daemon_output, "w")
@@ -360,11 +368,6 @@ class SimRun:
         self.daemon_output = Path(log_run) / "daemon.log"
         self.daemon_output.parent.mkdir(parents=True, exist_ok=True)
         self._start_daemon()
-
-    cancelled = threading.Event()
-    """Set, every run of this process gives up at its next check (SimError) and stops its
-    children: how a program running several on threads (the navigation benchmark) stops them all
-    on Ctrl-C or SIGTERM, which only its main thread receives."""
 
     def _check_children(self) -> None:
         if SimRun.cancelled.is_set():
