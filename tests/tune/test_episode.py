@@ -10,7 +10,10 @@ the runner hands readings over as they are sampled instead of on the emulator's 
 The worlds: two of ``scattered`` (static obstacles) and two of ``crossing`` (2-5 moving drums).
 Not ``moving``: its crossing drum is timed to meet the rover, which then stops, escorts it or
 passes, and a few centimetres of GPS noise choose between them (seed 2 drove 38.8 m in the runner
-and 29.5 m in a suite's SITL run, after agreeing in four runs before).
+and 29.5 m in a suite's SITL run, after agreeing in four runs before). Nor ``crossing`` seed 2: the
+runner, started every 0.25 s of sim time from 20 to 76 s, struck a drum at one start (66.75 s, the
+default rule base of 2026-11-26; 61.5 and 61.75 s with the one before), and a clean-clone suite's
+SITL run armed at just that time; seeds 1 and 6 succeed at every one of the 224 starts.
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ yielding the two agreed within 1%."""
 
 
 @pytest.mark.sitl
-@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 1), ("crossing", 2)])
+@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 1), ("crossing", 6)])
 def test_the_runner_reproduces_a_lockstep_sitl_run(tmp_path, name, seed):
     scenario = scenarios(seed)[name]
     mission, world = write_inputs(scenario, tmp_path)
