@@ -705,6 +705,7 @@ class Autopilot:
         return prearm.ArmingInputs(
             position_en=position,
             estimator_healthy=pose is not None and pose.healthy,
+            gps_ok=pose is not None and pose.gps_ok,
             range_ages_s={o: max(0.0, last - r.time_s) for o, r in self._ranges.items()},
             needed_orientations=sorted(self.rangefinder_plan.required) if self.rangefinder_plan else self.navigator.orientations,
             rangefinder_timeout_s=self.config.failsafe.rangefinder_timeout_s,

@@ -7,6 +7,8 @@ order, or an empty list. Force-arming (ARM_FORCE_MAGIC) skips them all, as in Ar
 The checks:
 - no position: no GPS home yet, or the estimator has not initialised;
 - estimator unhealthy (position or heading uncertainty beyond its health limits);
+- no GPS fix fused within the estimator's ``gps_timeout_s`` (a dropout or a glitch it rejects):
+  armed now, the rover would start on dead reckoning;
 - a stored fence the planner cannot use (invalid geometry);
 - a rangefinder the rule base reads has not reported within ``rangefinder_timeout_s``;
 - the rover is outside an inclusion fence or inside an exclusion zone;
@@ -35,6 +37,8 @@ class ArmingInputs:
     position_en: EN | None
     """The estimated position, None before the estimator has one."""
     estimator_healthy: bool
+    gps_ok: bool = True
+    """The estimator fused a GPS fix within its ``gps_timeout_s``."""
     range_ages_s: Mapping[int, float] = field(default_factory=dict)
     """Age of the last reading per rangefinder orientation (absent: never heard)."""
     needed_orientations: Sequence[int] = ()
@@ -57,6 +61,8 @@ def failures(inputs: ArmingInputs) -> list[str]:
         found.append("no position (waiting for GPS)")
     elif not inputs.estimator_healthy:
         found.append("estimator unhealthy")
+    if inputs.position_en is not None and not inputs.gps_ok:
+        found.append("no recent GPS fix")
     if inputs.fence_error:
         found.append(f"fence unusable: {inputs.fence_error}")
     silent = [o for o in inputs.needed_orientations if inputs.range_ages_s.get(o, math.inf) > inputs.rangefinder_timeout_s]

@@ -45,8 +45,8 @@ def mission(*points: tuple[float, float], fence: list[MissionItem] | None = None
 
 
 def pose(east_m: float = 0.0, north_m: float = 0.0, heading_rad: float = math.pi / 2, speed_mps: float = 0.0,
-         t_s: float = 0.0, healthy: bool = True) -> Pose:  # fmt: skip
-    return Pose(t_s, east_m, north_m, heading_rad, speed_mps, 0.0, np.eye(3) * 0.01, healthy, True, 0.1, 0.05)
+         t_s: float = 0.0, healthy: bool = True, gps_ok: bool = True) -> Pose:  # fmt: skip
+    return Pose(t_s, east_m, north_m, heading_rad, speed_mps, 0.0, np.eye(3) * 0.01, healthy, gps_ok, 0.1, 0.05)
 
 
 def rover_config() -> Config:
@@ -64,6 +64,8 @@ class Bench:
     heading_rad: float = math.pi / 2
     t_s: float = 0.0
     healthy: bool = True
+    gps_ok: bool = True
+    """The estimator's pose says a fix was fused recently."""
     ranges_m: dict[int, float] = field(default_factory=lambda: dict.fromkeys(ORIENTATIONS, math.inf))
     """Range per orientation; delete a key to silence that rangefinder."""
     vehicle_age_s: float = 0.0
@@ -100,7 +102,7 @@ class Bench:
         return (self.left_mps + self.right_mps) / 2.0
 
     def pose(self) -> Pose | None:
-        return pose(self.east_m, self.north_m, self.heading_rad, self.speed_mps, self.t_s, self.healthy)
+        return pose(self.east_m, self.north_m, self.heading_rad, self.speed_mps, self.t_s, self.healthy, self.gps_ok)
 
     def _move(self, command, dt_s: float) -> None:
         if isinstance(command, WheelCommand):

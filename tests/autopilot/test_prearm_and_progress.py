@@ -24,6 +24,7 @@ SQUARE = ((-50.0, -50.0), (50.0, -50.0), (50.0, 50.0), (-50.0, 50.0))
     [
         ({"position_en": None}, "no position (waiting for GPS)"),
         ({"estimator_healthy": False}, "estimator unhealthy"),
+        ({"gps_ok": False}, "no recent GPS fix"),
         ({"range_ages_s": {0: 0.1, 2: 0.1, 4: 3.0}}, "rangefinder missing: back, left"),
         ({"fence": Fence(inclusion_polygons=(SQUARE,)), "position_en": (60.0, 0.0)}, "outside the inclusion fence"),
         ({"fence": Fence(exclusion_circles=(Circle((1.0, 0.0), 3.0),))}, "inside a fence exclusion zone"),
@@ -71,6 +72,19 @@ def test_arming_needs_the_rangefinders_the_rule_base_reads():
     bench.run(1.0)
     assert not bench.request(bench.autopilot.arm(True)).accepted
     assert bench.texts[-1] == "PreArm: rangefinder missing: left"
+
+
+def test_arming_waits_for_a_fresh_gps_fix():
+    bench = Bench()
+    bench.home()
+    bench.gps_ok = False  # a dropout after home was set: the estimator still has a position
+    bench.step()
+    reply = bench.request(bench.autopilot.arm(True))
+    assert reply.result == mav.MAV_RESULT_FAILED and reply.reason == "no recent GPS fix"
+    assert bench.texts[-1] == "PreArm: no recent GPS fix" and not bench.of_type(ArmRequest)
+    bench.gps_ok = True
+    bench.step()
+    assert bench.request(bench.autopilot.arm(True)).accepted
 
 
 def test_arming_inside_an_exclusion_zone_is_refused():

@@ -131,10 +131,12 @@ def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
     rover-sitl refuses without a 3D fix (ARMING_CHECK 1), ArduPilot on its pre-arm checks. The
     ground station's COMMAND_ACK is the vehicle's answer (it was ACCEPTED as soon as the daemon
     forwarded the request, and the rover stayed disarmed in AUTO with nothing to retry on); with
-    the fix back the same command arms."""
+    the fix back the same command arms. The daemon's own GPS check is given a long window here so
+    that the vehicle's check is the one that decides."""
     from rover_ctl.vocabulary import mav
 
-    with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0)) as run:
+    options = SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0, config_overrides=["estimator.gps_timeout_s=60"])
+    with SimRun(options) as run:
         assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # the rangefinders known
         run.sitl_param("SIM_GPS_DISABLE", 1)
@@ -147,6 +149,22 @@ def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
         assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED
         assert run.wait_for(lambda p: p.armed, wall_timeout_s=10.0)
+
+
+def test_the_daemon_refuses_arming_without_a_recent_fix(tmp_path):
+    """The daemon's own pre-arm check: after a GPS dropout its estimator still has a position
+    (dead reckoning), but arming now would start the mission blind; refused with its reason,
+    without asking the vehicle."""
+    from rover_ctl.vocabulary import mav
+
+    with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0)) as run:
+        assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # the rangefinders known
+        run.sitl_param("SIM_GPS_DISABLE", 1)
+        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False  # past gps_timeout_s (1 s)
+        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_FAILED
+        assert run.wait_for(lambda p: "PreArm: no recent GPS fix" in p.texts, wall_timeout_s=5.0)
+        assert not any(t.startswith("Vehicle refused arming") for t in run.progress.texts)
 
 
 def test_cancelling_stops_runs_on_other_threads_and_their_children(tmp_path):
