@@ -33,7 +33,7 @@ from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.app.sim import STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
-from sitl.launch import free_port, line_relay, stop_process
+from sitl.launch import free_port, line_relay, signals_held, stop_process
 
 SHARED_DIR = Path(os.environ.get("ROVER_CTL_SHARED") or Path(__file__).resolve().parents[2].parent / "shared")
 """../shared beside the checkout, or $ROVER_CTL_SHARED (a git worktree elsewhere)."""
@@ -187,8 +187,9 @@ class FirmwareRun(SimRun):
         sitl_log = open(self.out / "sitl.log", "w")
         sitl_out = open(self.out / "sitl.out", "w")
         self._logs += [sitl_log, sitl_out]
-        self.sitl = FirmwareProcess(self._firmware_command(), cwd=self.workdir, stdin=subprocess.DEVNULL,
-                                    stdout=sitl_out, stderr=sitl_log)  # fmt: skip
+        with signals_held():  # stop() must know the firmware whenever Ctrl-C or SIGTERM comes
+            self.sitl = FirmwareProcess(self._firmware_command(), cwd=self.workdir, stdin=subprocess.DEVNULL,
+                                        stdout=sitl_out, stderr=sitl_log)  # fmt: skip
         lower_priority(self.sitl.pid, FIRMWARE_NICE)
         self._connect_gcs()
         self.gcs.upload(self.mission)
