@@ -13,6 +13,11 @@ kept from the last run, each row dated); ``--variants paper,default`` runs only 
 a checkout of this tree (docs/tuning.md, "On a cluster"). Ctrl-C or SIGTERM stops a run: the
 benchmark in progress stops its emulators and daemons (the navigation benchmark's worlds run on
 threads: ``SimRun.cancelled``) and nothing is written.
+
+A result may carry ``"notes"``: paragraphs written by hand (what a row's figures were compared
+with, why a row is older), each dated in its text. A rerun keeps them from the JSON it replaces and
+they follow the benchmark's own text in docs/BENCHMARKS.md, so whoever re-runs a row reads them and
+edits any that the new figures make untrue.
 """
 
 from __future__ import annotations
@@ -82,7 +87,12 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
         result.setdefault("date", time.strftime("%Y-%m-%d"))
         result["wall_s"] = round(time.perf_counter() - started, 1)
-        (RESULTS / f"{result.get('name', name)}.json").write_text(json.dumps(result, indent=2, default=float) + "\n")
+        path = RESULTS / f"{result.get('name', name)}.json"
+        if path.exists() and "notes" not in result:
+            notes = json.loads(path.read_text()).get("notes")
+            if notes:
+                result["notes"] = notes
+        path.write_text(json.dumps(result, indent=2, default=float) + "\n")
         print(result.get("markdown", ""), flush=True)
     write_doc()
     return 0
@@ -98,7 +108,7 @@ def write_doc() -> None:
         result = json.loads(path.read_text())
         parts.append(f"\n## {result.get('title', path.stem)}\n")
         parts.append(f"_`{result.get('command', f'python -m bench {path.stem}')}` on {result.get('date')}, {result.get('machine')}, {result.get('wall_s')} s._\n")
-        parts.append(result.get("markdown", "") + "\n")
+        parts.append("\n\n".join([result.get("markdown", ""), *result.get("notes", [])]) + "\n")
     DOC.write_text("\n".join(parts))
 
 
