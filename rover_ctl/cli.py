@@ -31,6 +31,43 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
+MAX_WAIT_S = 86400.0
+"""The longest ``--timeout`` a client command takes (a day): beyond it, clock arithmetic overflows."""
+
+
+def wait_seconds(text: str) -> float:
+    """argparse type: a time to wait, in (0, MAX_WAIT_S] seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not 0.0 < value <= MAX_WAIT_S:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"expected seconds in (0, {MAX_WAIT_S:g}], got {text!r}")
+    return value
+
+
+def mavlink_id(text: str) -> int:
+    """argparse type: a MAVLink system or component id we send as (1-255; 0 addresses everyone)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"expected an id in 1..255, got {text!r}")
+    return value
+
+
+def seed(text: str) -> int:
+    """argparse type: a random seed (a whole number >= 0, as numpy takes)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="rover-ctl",

@@ -140,7 +140,11 @@ class Param:
         """A number (PARAM_SET, a .parm line, ``--set NAME=``) as the field value; ParamError if refused."""
         if isinstance(number, bool) or not isinstance(number, (int, float)):
             raise ParamError(f"expected a number, got {number!r}")
-        if not math.isfinite(number):
+        try:
+            finite = math.isfinite(number)
+        except OverflowError:  # an integer beyond any float (a TOML config may hold one)
+            raise ParamError(f"a {len(str(abs(number)))}-digit number is out of range ({self.range_text()})") from None
+        if not finite:
             raise ParamError(f"{number} is not a finite number")
         if self.kind is not Kind.FLOAT and number != int(number):
             raise ParamError(f"{_number_text(number)} is not a whole number ({self.range_text()})")

@@ -64,3 +64,26 @@ def test_cli_help_and_bad_flag():
     assert ok.returncode == 0 and "rover-ctl" in ok.stdout
     bad = subprocess.run([sys.executable, "-m", "rover_ctl", "--no-such-flag"], capture_output=True, text=True)
     assert bad.returncode == 2 and "unrecognized arguments: --no-such-flag" in bad.stderr
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["mission", "upload", "missions/cmac_jump.waypoints", "--timeout", "nan"], "--timeout: expected seconds in (0, 86400], got 'nan'"),
+        (["mission", "download", "x.plan", "--timeout", "1e300"], "--timeout: expected seconds in (0, 86400]"),
+        (["params", "--connect", "udpin:127.0.0.1:9", "--timeout", "-1"], "--timeout: expected seconds"),
+        (["arm", "--source-system", "300"], "--source-system: expected an id in 1..255, got '300'"),
+        (["mode", "HOLD", "--source-component", "-1"], "--source-component: expected an id in 1..255"),
+        (["sim", "missions/cmac_jump.waypoints", "--seed", "-1"], "--seed: expected a whole number >= 0, got '-1'"),
+        (["tune", "default", "--scenarios", "open", "--seed", "x"], "--seed: expected a whole number, got 'x'"),
+    ],
+)
+def test_flag_values_out_of_range_are_one_line_before_anything_runs(capsys, args, message):
+    """They reached a socket timeout, struct packing or numpy's seeding and ended in a traceback."""
+    from rover_ctl.cli import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err

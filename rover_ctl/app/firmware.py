@@ -157,7 +157,7 @@ class FirmwareRun(SimRun):
         if home is None:
             raise SimError("the firmware needs a mission with a home position")
         params = extra_params(RANGEFINDER_LAYOUTS[o.rangefinders]) | o.params
-        return firmware_command(self.binary, self.workdir, (home.lat_deg, home.lon_deg, home.alt_m), params,
+        return firmware_command(self.binary, self.workdir, (home.lat_deg, home.lon_deg, self.home_alt_m), params,
                                 speedup=1.0 if o.lockstep else o.speedup,
                                 serial_ports=[self.vehicle_port, self.watch_port], firmware_dir=o.firmware_dir)  # fmt: skip
 

@@ -18,6 +18,7 @@ mission's real duration.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import logging
 import os
@@ -64,6 +65,10 @@ def new_run_folder(root: str | Path, max_total_mb: float) -> Path:
     the oldest ones while the run folders together exceed ``max_total_mb`` (0: no limit).
     Raises LogDirError when ``root`` cannot be written."""
     root = Path(root).expanduser()
+    latest = root / LATEST
+    if latest.exists() and not latest.is_symlink():  # checked first: nothing is made for a run that cannot start
+        raise LogDirError(f"log dir {root}: {latest} is not the link this program keeps there; move it away")
+    run = pointer = None
     try:
         root.mkdir(parents=True, exist_ok=True)
         existing = run_folders(root)
@@ -78,8 +83,14 @@ def new_run_folder(root: str | Path, max_total_mb: float) -> Path:
         pointer = root / f".{LATEST}.{os.getpid()}"
         pointer.unlink(missing_ok=True)
         pointer.symlink_to(run.name)
-        os.replace(pointer, root / LATEST)  # atomic: readers see the old or the new run, never none
+        os.replace(pointer, latest)  # atomic: readers see the old or the new run, never none
     except OSError as exc:
+        for leftover in (pointer, run):  # nothing half-made stays behind
+            with contextlib.suppress(OSError):
+                if leftover is not None and leftover.is_symlink():
+                    leftover.unlink()
+                elif leftover is not None:
+                    leftover.rmdir()  # only if still empty
         raise LogDirError(f"log dir {root}: {exc.strerror or exc}") from None
     prune_runs(root, max_total_mb, keep=run)
     return run

@@ -57,6 +57,7 @@ from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
 from sitl.launch import SitlError, SitlProcess, free_port, signals_held, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
+from sitl.world import WorldError, load_world  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
 """The ``rover-ctl`` command of this interpreter."""
@@ -219,7 +220,13 @@ class SimRun:
         if not self.mission.items:
             raise SimError(f"{options.mission}: the mission has no items")
         self.home = self.mission.home
-        self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home.alt_m) if self.home else None
+        # A mission's home altitude may be NaN (MAVLink's "unset"): then 0, as the emulator gets it.
+        self.home_alt_m = self.home.alt_m if self.home and math.isfinite(self.home.alt_m) else 0.0
+        self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home_alt_m) if self.home else None
+        try:  # the emulator's own reader: its one-line error, before anything starts
+            self.world = load_world(options.world) if options.world is not None else None
+        except WorldError as exc:
+            raise SimError(str(exc)) from None
         self.targets = {seq: (item.x, item.y) for seq, item in enumerate(self.mission.items, 1) if item.is_global and (item.x or item.y)}
         self.progress = Progress(waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items))
         self.world_path: Path | None = options.world
@@ -262,10 +269,9 @@ class SimRun:
         heading = 0.0
         if o.world is not None:
             cmd += ["--world", str(o.world)]
-            home = json.loads(Path(o.world).read_text(encoding="utf-8")).get("home")
-            heading = float(home[3]) if home and len(home) > 3 else 0.0
+            heading = self.world.home.heading_deg if self.world is not None and self.world.home is not None else 0.0
         if self.home is not None:
-            cmd += [f"--home={self.home.lat_deg},{self.home.lon_deg},{self.home.alt_m},{heading}"]
+            cmd += [f"--home={self.home.lat_deg},{self.home.lon_deg},{self.home_alt_m},{heading}"]
         if o.obstacles:
             legs = [(self.home.lat_deg, self.home.lon_deg)] if self.home else []
             legs += [self.targets[s] for s in sorted(self.targets)]

@@ -71,11 +71,14 @@ def _read_rows(args: argparse.Namespace, rb: RuleBase) -> tuple[list[str], list[
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{where}: cannot read: {exc}") from None
     reader = csv.reader(io.StringIO(text))
-    header = [h.strip() for h in next(reader, [])]
-    missing = [n for n in rb.input_names if n not in header]
-    if missing:
-        raise UserError(f"{where}: missing input column(s) {', '.join(missing)} (header: {','.join(header) or 'empty'})")
-    rows = [row for row in reader if row]
+    try:
+        header = [h.strip() for h in next(reader, [])]
+        missing = [n for n in rb.input_names if n not in header]
+        if missing:
+            raise UserError(f"{where}: missing input column(s) {', '.join(missing)} (header: {','.join(header) or 'empty'})")
+        rows = [row for row in reader if row]
+    except csv.Error as exc:  # e.g. a field over the csv module's 128 KB limit
+        raise UserError(f"{where} line {reader.line_num}: not CSV: {exc}") from None
     columns = {n: np.empty(len(rows)) for n in rb.input_names}
     for line, row in enumerate(rows, start=2):
         if len(row) != len(header):
@@ -138,14 +141,19 @@ def cmd_show(args: argparse.Namespace) -> int:
     for warning in rb.warnings:
         print(f"  warning: {warning}")
     if args.plot:
-        _plot(rb, args.plot)
-        print(f"  membership functions drawn to {args.plot}")
+        print(f"  membership functions drawn to {_plot(rb, args.plot)}")
     return 0
 
 
-def _plot(rb: RuleBase, path: str) -> None:
+def _plot(rb: RuleBase, path: str) -> Path:
+    """Draw the membership functions to ``path`` (``.png`` added without a suffix, as matplotlib
+    does); the file written."""
     import matplotlib
     import numpy as np
+
+    if Path(path).is_dir():
+        raise UserError(f"--plot {path}: is a folder; give a file name, e.g. {Path(path) / 'sets.png'}")
+    target = Path(path) if Path(path).suffix else Path(path).with_suffix(".png")
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -166,8 +174,9 @@ def _plot(rb: RuleBase, path: str) -> None:
         ax.axis("off")
     fig.tight_layout()
     try:
-        fig.savefig(path, dpi=90)
+        fig.savefig(target, dpi=90)
     except (OSError, ValueError) as exc:
-        raise UserError(f"{path}: cannot write the plot: {exc}") from None
+        raise UserError(f"{target}: cannot write the plot: {exc}") from None
     finally:
         plt.close(fig)
+    return target

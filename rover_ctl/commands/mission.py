@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rover_ctl.cli import UserError
+from rover_ctl.cli import UserError, mavlink_id, wait_seconds
 from rover_ctl.config import GcsParams
 
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
@@ -34,9 +34,9 @@ def link_options(p: argparse.ArgumentParser) -> None:
     """--connect and the client's options (also used by `rover-ctl arm|disarm|mode`)."""
     p.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
                    help=f"pymavlink connection string of the autopilot (default {DEFAULT_CONNECT})")  # fmt: skip
-    p.add_argument("--source-system", type=int, default=255, metavar="ID", help="our MAVLink system id (255)")
-    p.add_argument("--source-component", type=int, default=190, metavar="ID", help="our component id (190)")
-    p.add_argument("--timeout", type=float, default=None, metavar="S",
+    p.add_argument("--source-system", type=mavlink_id, default=255, metavar="ID", help="our MAVLink system id (255)")
+    p.add_argument("--source-component", type=mavlink_id, default=190, metavar="ID", help="our component id (190)")
+    p.add_argument("--timeout", type=wait_seconds, default=None, metavar="S",
                    help="give up after this long without an answer (default 5 s)")  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--signing-key", metavar="PASSPHRASE|@FILE",

@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rover_ctl.cli import UserError
+from rover_ctl.cli import UserError, wait_seconds
 from rover_ctl.config import ConfigError, GcsParams, load_config
 
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
@@ -37,7 +37,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="as rover-ctl run --set (repeatable)")
     parser.add_argument("--mission-store", metavar="FILE", help="as rover-ctl run: the stored parameters are params.parm beside it")
     parser.add_argument("--markdown", action="store_true", help="show: the documentation table (docs/gcs.md)")
-    parser.add_argument("--timeout", type=float, default=5.0, metavar="S", help="--connect: give up after this long without an answer")
+    parser.add_argument("--timeout", type=wait_seconds, default=5.0, metavar="S", help="--connect: give up after this long without an answer")
     parser.set_defaults(func=run)
 
 
@@ -80,7 +80,7 @@ def _config(args: argparse.Namespace):
 def _local(args: argparse.Namespace):
     from rover_ctl.mavlink.params import ConfigParams
 
-    table = ConfigParams.persistent(_config(args))
+    table = ConfigParams.persistent(_config(args), read_only=True)
     if table.store_error:
         raise UserError(table.store_error)
     return table

@@ -61,8 +61,8 @@ def cmd_setup(args: argparse.Namespace) -> int:
 def cmd_remove(args: argparse.Namespace) -> int:
     store = _store(args)
     try:
-        store.remove_key()
+        removed = store.remove_key()
     except OSError as exc:
         raise UserError(f"{store.key_path}: {exc}") from None
-    print(f"signing key removed: {store.key_path}")
+    print(f"signing key removed: {store.key_path}" if removed else f"no signing key at {store.key_path}: nothing to remove")
     return 0

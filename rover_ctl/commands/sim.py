@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+from rover_ctl.cli import seed
+
 
 def _positive(text: str) -> float:
     try:
@@ -27,7 +29,7 @@ def add_parser(subparsers) -> None:
     world = parser.add_mutually_exclusive_group()
     world.add_argument("--world", type=Path, metavar="GEOJSON", help="emulator world (obstacles, faults)")
     world.add_argument("--obstacles", type=int, metavar="N", help="N seeded random obstacles along the mission legs")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the emulator's random draws (default 1)")
+    parser.add_argument("--seed", type=seed, default=1, help="seed of the emulator's random draws (default 1)")
     parser.add_argument("--rulebase", default="default", metavar="NAME|FILE", help="fuzzy rule base (default: default)")
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument("--lockstep", action="store_true", help="lockstep with the emulator (default; deterministic, as fast as possible)")
@@ -76,8 +78,22 @@ def _run(args: argparse.Namespace) -> int:
     except SigningError as exc:
         raise UserError(str(exc)) from None
     budget_mb = load_config(None, args.set).daemon.log_max_total_mb  # also refuses a bad --set now
+    from rover_ctl.config import NavigatorParams
+    from rover_ctl.fuzzy import RuleBaseError
+    from rover_ctl.navigation.navigator import Navigator
+    from sitl.world import WorldError, load_world
+
+    try:  # the daemon's and the emulator's own checks, before a run folder is made for them
+        Navigator(args.rulebase, NavigatorParams(), 1.0)
+    except (RuleBaseError, OSError, ValueError) as exc:
+        raise UserError(f"--rulebase {args.rulebase}: {exc}") from None
     try:
-        load_mission(args.mission)  # refused before a run folder is made for it
+        if args.world is not None:
+            load_world(args.world)
+    except WorldError as exc:
+        raise UserError(str(exc)) from None
+    try:
+        load_mission(args.mission)
         out = new_run_folder(args.out or Path("runs") / args.mission.stem, budget_mb)
     except (MissionFileError, LogDirError) as exc:
         raise UserError(str(exc)) from None

@@ -9,6 +9,8 @@ import signal
 import sys
 from pathlib import Path
 
+from rover_ctl.cli import seed
+
 SCHEDULER = re.compile(r"^(tcp|tls)://[^\s/:]+:\d{1,5}$")
 
 
@@ -40,7 +42,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--generations", type=_count, default=30, metavar="G", help="CMA-ES generations (default 30)")
     parser.add_argument("--population", type=_count, default=8, metavar="P", help="candidates per generation (default 8, at least 2)")
     parser.add_argument("--holdout", type=_count, default=10, metavar="N", help="held-out worlds per scenario for the report (default 10)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of CMA-ES and of the world seeds (default 1)")
+    parser.add_argument("--seed", type=seed, default=1, help="seed of CMA-ES and of the world seeds (default 1)")
     parser.add_argument("--scheduler", type=_scheduler, metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a local cluster)")
     parser.add_argument("--workers", type=_count, metavar="N", help="local cluster workers (default: one per core)")
     parser.add_argument("--scale-outputs", action="store_true", help="also search one scale of the output sets")

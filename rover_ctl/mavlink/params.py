@@ -54,13 +54,15 @@ class ConfigParams:
         """Why the stored parameters could not be loaded (the file was moved aside), if they could not."""
 
     @classmethod
-    def persistent(cls, config: Config) -> "ConfigParams":
+    def persistent(cls, config: Config, read_only: bool = False) -> "ConfigParams":
+        """``read_only``: a command that only looks (``rover-ctl params``) leaves a corrupt store
+        where it is and only says why."""
         path = store_path(config)
         table = cls(config, ParamStore(path) if path else None)
-        table.load()
+        table.load(read_only)
         return table
 
-    def load(self) -> None:
+    def load(self, read_only: bool = False) -> None:
         """Apply the stored values, except to parameters given with ``--set``. A corrupt store is
         moved aside with one error line; the daemon then runs on its config."""
         if self.store is None:
@@ -68,6 +70,9 @@ class ConfigParams:
         try:
             self.stored = self.store.load()
         except ParamStoreError as exc:
+            if read_only:
+                self.store_error = f"{exc}; fix or remove it (the daemon moves it aside when it starts)"
+                return
             aside = self.store.quarantine()
             kept = f"moved to {aside}" if aside else "left as it is"
             self.store_error = f"{exc}; {kept}, starting without stored parameters"

@@ -81,12 +81,16 @@ def _write_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     try:
-        os.fchmod(fd, 0o600)
-        os.write(fd, text.encode("ascii"))
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
+        try:
+            os.fchmod(fd, 0o600)
+            os.write(fd, text.encode("ascii"))
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:  # a key must not stay behind in a stray file (path is a folder, the disk is full)
+        tmp.unlink(missing_ok=True)
+        raise
     dir_fd = os.open(path.parent, os.O_RDONLY)
     try:
         os.fsync(dir_fd)
@@ -129,8 +133,13 @@ class KeyStore:
         except OSError as exc:
             raise SigningError(f"{self.key_path}: cannot write signing key: {exc}") from None
 
-    def remove_key(self) -> None:
-        self.key_path.unlink(missing_ok=True)
+    def remove_key(self) -> bool:
+        """Delete the key file; False if there was none."""
+        try:
+            self.key_path.unlink()
+        except FileNotFoundError:
+            return False
+        return True
 
     def load_timestamp(self) -> int:
         """The last saved timestamp; 0 if none or unreadable (the clock then rules)."""

@@ -73,7 +73,11 @@ def _number(value: Any, where: str, errors: list[str], allow_null: bool = False)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         errors.append(f"{where}: expected a number, got {json.dumps(value)[:40]}")
         return math.nan
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:  # an integer beyond any float
+        errors.append(f"{where}: number out of range ({len(str(abs(value)))} digits)")
+        return math.nan
 
 
 def _whole(value: Any, where: str, errors: list[str]) -> int:
@@ -93,7 +97,9 @@ def _member(obj: dict, key: str, kind: type | tuple, where: str, required: bool 
     value = obj[key]
     if not isinstance(value, kind):
         names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
-        raise _Refused(f"{where}.{key}: expected {_JSON_NAMES.get(names, names)}, got {json.dumps(value)[:40]}")
+        # "file.plan: mission.items" inside the file, "file.plan: geoFence" at its top
+        path = f"{where}.{key}" if ": " in where else f"{where}: {key}"
+        raise _Refused(f"{path}: expected {_JSON_NAMES.get(names, names)}, got {json.dumps(value)[:40]}")
     return value
 
 
@@ -180,6 +186,9 @@ def _parse_fence(fence_obj: dict, source: str, parsed: Parsed) -> None:
             continue
         command = Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION if inclusion else Cmd.NAV_FENCE_POLYGON_VERTEX_EXCLUSION
         vertices = poly["polygon"]
+        if not vertices:  # no items would carry it, and the fence would be gone without a word
+            parsed.errors.append(f"{where}.polygon: no vertices (a polygon needs at least 3)")
+            continue
         for k, vertex in enumerate(vertices):
             lat, lon = _latlon(vertex, f"{where}.polygon[{k}]", parsed.errors)
             parsed.labels[(MissionType.FENCE, len(fence))] = f"{where}.polygon[{k}]"
@@ -238,10 +247,10 @@ def parse_plan(text: str, source: str) -> Parsed:
         file_type = doc.get("fileType")
         if file_type != FILE_TYPE:
             raise _Refused(f"{source}: fileType is {json.dumps(file_type)}, expected \"{FILE_TYPE}\"")
-        if doc.get("version") != PLAN_VERSION:
+        if isinstance(doc.get("version"), bool) or doc.get("version") != PLAN_VERSION:  # true == 1 in Python
             raise _Refused(f"{source}: plan version {json.dumps(doc.get('version'))} is not supported (expected {PLAN_VERSION})")
         mission_obj = _member(doc, "mission", dict, source)
-        if mission_obj.get("version") != MISSION_VERSION:
+        if isinstance(mission_obj.get("version"), bool) or mission_obj.get("version") != MISSION_VERSION:
             raise _Refused(
                 f"{source}: mission version {json.dumps(mission_obj.get('version'))} is not supported "
                 f"(expected {MISSION_VERSION}; re-save the plan with a current QGroundControl)"

@@ -54,6 +54,8 @@ INSTEAD = {
 }
 DEFAULT_INSTEAD = "the rover goes on with the next item"
 FLOAT32_MAX = 3.4028234663852886e38
+FLOAT32_TINY = 1.401298464324817e-45
+"""The smallest positive float32: anything smaller is sent as 0."""
 """Largest finite float32: MISSION_ITEM_INT's param1-4 and z are float32."""
 INT32_MAX = 2**31 - 1
 """MISSION_ITEM_INT's x and y are int32 (scaled by the frame: 1e7 global, 1e4 local, else raw)."""
@@ -195,7 +197,8 @@ def _check_mission(mission: Mission, max_speed_mps: float, label, errors: list[s
 
 
 def circle_radius_ok(radius_m: float) -> bool:
-    return math.isfinite(radius_m) and 0.0 < radius_m <= FLOAT32_MAX
+    """Positive as the float32 that MISSION_ITEM_INT's param1 carries (1e-300 is 0 there)."""
+    return math.isfinite(radius_m) and FLOAT32_TINY <= radius_m <= FLOAT32_MAX
 
 
 def latlon_ok(lat_deg: float, lon_deg: float) -> bool:

@@ -50,6 +50,25 @@ def test_bad_input_is_one_line_and_exit_2(args, message, capsys):
     assert message in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize(
+    "world, message",
+    [(b"", "not valid JSON"), (b'{"type": "FeatureCo', "not valid JSON"), (b"[1, 2]", "expected a GeoJSON FeatureCollection"),
+     (b"\xff\xfe\x00garbage", "not UTF-8 text")],
+)
+def test_sim_refuses_a_bad_world_or_rulebase_before_making_a_run_folder(tmp_path, capsys, world, message):
+    """The emulator's own reader decides (it was read with a bare json.loads first: a traceback),
+    and nothing is left in the output folder."""
+    path = tmp_path / "w.geojson"
+    path.write_bytes(world)
+    out = tmp_path / "runs"
+    assert main(["sim", "missions/cmac_jump.waypoints", "--world", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and message in err[0], err
+    assert main(["sim", "missions/cmac_jump.waypoints", "--rulebase", str(path), "--out", str(out)]) == 2
+    assert "--rulebase" in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_sigterm_stops_cleanly_with_neutral_first(tmp_path):
     from pymavlink import mavutil
 

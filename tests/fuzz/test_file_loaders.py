@@ -175,3 +175,12 @@ def test_mission_store_loader(tmp_path_factory, data):
             store.load()
         except StoreError as exc:
             assert "\n" not in str(exc).strip()
+
+
+def test_a_config_number_beyond_any_float_is_a_config_error(tmp_path):
+    """TOML keeps integers exact: a 400-digit one reached the parameter table's float checks and
+    ended in OverflowError (a traceback, and a service restart loop on exit 1)."""
+    path = tmp_path / "rover.toml"
+    path.write_text(CONFIG_TOML.replace("cruise_speed_mps = 1.0", "cruise_speed_mps = 1" + "0" * 400))
+    with pytest.raises(ConfigError, match=r"executor.cruise_speed_mps: a 401-digit number is out of range"):
+        load_config(path)

@@ -43,6 +43,7 @@ def test_eval_stdin_stdout_with_explain(capsys, monkeypatch):
         ("target_distance,label\n1,a\n", "<stdin>: missing input column(s) target_direction"),
         (HEADER + "\n1,2,3,x,5,6,a\n", "<stdin> line 2 column obstacle_front: not a number: 'x'"),
         (HEADER + "\n1,2,3\n", "<stdin> line 2: 3 fields, the header has 7"),
+        (HEADER + "\n1,2,3,4,5,6," + "a" * 200_000 + "\n", "<stdin> line 2: not CSV: field larger than field limit"),
     ],
 )
 def test_eval_bad_input_is_one_line_exit_2(capsys, monkeypatch, text, message):
@@ -65,3 +66,11 @@ def test_show_prints_variables_rules_and_plots(tmp_path, capsys):
     assert "forward_fast     133.34 200 200 266.67" in out
     assert "972 rules" in out and "warning: paper.toml: 1 input combination(s) have no rule for left_motor" in out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_show_plot_says_which_file_it_wrote(tmp_path, capsys):
+    """matplotlib adds .png to a name without a suffix; the message named the path as given."""
+    code, out, _ = run(["fuzzy", "show", "default", "--plot", str(tmp_path / "sets")], capsys)
+    assert code == 0 and f"drawn to {tmp_path / 'sets.png'}" in out and (tmp_path / "sets.png").is_file()
+    code, _, err = run(["fuzzy", "show", "default", "--plot", str(tmp_path)], capsys)
+    assert code == 2 and f"--plot {tmp_path}: is a folder" in err

@@ -77,3 +77,22 @@ def test_a_failed_write_keeps_the_old_file_and_says_so(tmp_path, monkeypatch):
     assert table.config.executor.cruise_speed_mps == 0.9  # in force for this run
     assert (tmp_path / "state" / "params.parm").read_text() == before
     assert [p.name for p in (tmp_path / "state").iterdir()] == ["params.parm"]  # no temporary file left
+
+
+def test_rover_ctl_params_leaves_a_corrupt_store_where_it_is(tmp_path, capsys):
+    """Showing, exporting or importing parameters only looks at the store: it moved a corrupt one
+    aside (and printed the reason twice) before refusing."""
+    from rover_ctl.cli import main
+
+    stored = tmp_path / "state" / "params.parm"
+    stored.parent.mkdir()
+    stored.write_text("WP_SPEED 999\n")
+    store_flag = ["--mission-store", str(tmp_path / "state" / "mission.json")]
+    assert main(["params", *store_flag]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "fix or remove it" in err[0], err
+    parm = tmp_path / "in.parm"
+    parm.write_text("WP_SPEED 1.0\n")
+    assert main(["params", "import", str(parm), *store_flag]) == 2
+    capsys.readouterr()
+    assert stored.read_text() == "WP_SPEED 999\n" and sorted(p.name for p in stored.parent.iterdir()) == ["params.parm"]

@@ -59,6 +59,16 @@ def test_an_unwritable_log_dir_is_a_log_dir_error(tmp_path):
 # ---- tlog timestamps ----------------------------------------------------------------------------
 
 
+def test_a_latest_that_is_not_our_link_is_refused_and_nothing_is_left(tmp_path):
+    """A folder named ``latest`` made rename fail after the run folder and the new link were made:
+    the message said "Is a directory" and every retry left another empty run and a stray link."""
+    (tmp_path / LATEST).mkdir()
+    for _ in range(2):
+        with pytest.raises(LogDirError, match=r"latest is not the link this program keeps there"):
+            new_run_folder(tmp_path, max_total_mb=0)
+    assert [p.name for p in tmp_path.iterdir()] == [LATEST]
+
+
 def test_log_clock_is_wall_time_until_lockstep_then_vehicle_time_continuously():
     wall = [1000.0]
     vehicle: list[float | None] = [None]

@@ -119,3 +119,17 @@ def test_signing_setup_writes_the_key_mavproxy_makes(tmp_path):
     result = subprocess.run([sys.executable, "-m", "rover_ctl", "mission", "upload", str(LOOP), "--signing-key", f"@{tmp_path / 'nope'}",
                              "--connect", "udpout:127.0.0.1:9"], capture_output=True, text=True, timeout=30)  # fmt: skip
     assert result.returncode == 2 and result.stderr.startswith("rover-ctl: error: --signing-key @") and len(result.stderr.splitlines()) == 1
+
+
+def test_a_failed_key_write_leaves_no_copy_and_remove_says_when_there_was_none(tmp_path, capsys):
+    """Writing over a folder failed at the rename and left ``.sign.key.<pid>.tmp`` holding the key;
+    removing a key that was never there said it was removed."""
+    from rover_ctl.cli import main
+
+    folder = tmp_path / "sign.key"
+    folder.mkdir()
+    assert main(["signing", "setup", PASSPHRASE, "--key-file", str(folder)]) == 2
+    assert capsys.readouterr().err.startswith(f"rover-ctl: error: {folder}: cannot write signing key")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sign.key"] and not any(folder.iterdir())
+    assert main(["signing", "remove", "--key-file", str(tmp_path / "none.key")]) == 0
+    assert "no signing key at" in capsys.readouterr().out
