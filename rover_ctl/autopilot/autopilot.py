@@ -26,8 +26,8 @@ gyro contradicts (``rover_ctl.estimation.wheel_map``), refuses arming and stops 
 One step: failsafes (``Failsafes``, on the failsafe clock: vehicle time, never going back) ->
 mode -> goal (AUTO/RTL: the mission executor; GUIDED: the guided target; LOITER: the station)
 -> path follower (planner, carrot) -> obstacle memory and fuzzy navigator -> wheel-speed PI.
-Its command is a ``WheelCommand``, or ``RELEASE`` (MANUAL: the radio drives). HOLD, disarmed,
-and failsafe holds brake to a stop, then send neutral.
+Its command is a ``WheelCommand``, or ``RELEASE`` (MANUAL: the radio drives). HOLD and
+failsafe holds brake to a stop, then send neutral; disarmed, neutral at once.
 """
 
 from __future__ import annotations
