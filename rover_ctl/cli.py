@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import sys
+from typing import Any, Callable
 
 from rover_ctl import __version__
 from rover_ctl.config import ConfigError
@@ -31,41 +33,29 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
+def number_type(kind: type, low: float, high: float, what: str, bounds: str) -> Callable[[str], Any]:
+    """An argparse type: ``kind(text)`` within ``[low, high]`` (NaN never is), else a one-line
+    refusal "expected WHAT BOUNDS, got TEXT"."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"expected {what} {bounds}, got {text!r}")
+        return value
+
+    return parse
+
+
 MAX_WAIT_S = 86400.0
 """The longest ``--timeout`` a client command takes (a day): beyond it, clock arithmetic overflows."""
-
-
-def wait_seconds(text: str) -> float:
-    """argparse type: a time to wait, in (0, MAX_WAIT_S] seconds."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
-    if not 0.0 < value <= MAX_WAIT_S:  # NaN fails too
-        raise argparse.ArgumentTypeError(f"expected seconds in (0, {MAX_WAIT_S:g}], got {text!r}")
-    return value
-
-
-def mavlink_id(text: str) -> int:
-    """argparse type: a MAVLink system or component id we send as (1-255; 0 addresses everyone)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if not 1 <= value <= 255:
-        raise argparse.ArgumentTypeError(f"expected an id in 1..255, got {text!r}")
-    return value
-
-
-def seed(text: str) -> int:
-    """argparse type: a random seed (a whole number >= 0, as numpy takes)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
-    return value
+wait_seconds = number_type(float, math.ulp(0.0), MAX_WAIT_S, "seconds", f"in (0, {MAX_WAIT_S:g}]")
+mavlink_id = number_type(int, 1, 255, "a whole number", "in 1..255 (a MAVLink id; 0 addresses everyone)")
+seed = number_type(int, 0, math.inf, "a whole number", ">= 0 (a random seed)")
+count = number_type(int, 1, math.inf, "a whole number", ">= 1")
+positive = number_type(float, math.ulp(0.0), math.inf, "a number", "> 0")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -72,9 +72,9 @@ def test_cli_help_and_bad_flag():
         (["mission", "upload", "missions/cmac_jump.waypoints", "--timeout", "nan"], "--timeout: expected seconds in (0, 86400], got 'nan'"),
         (["mission", "download", "x.plan", "--timeout", "1e300"], "--timeout: expected seconds in (0, 86400]"),
         (["params", "--connect", "udpin:127.0.0.1:9", "--timeout", "-1"], "--timeout: expected seconds"),
-        (["arm", "--source-system", "300"], "--source-system: expected an id in 1..255, got '300'"),
-        (["mode", "HOLD", "--source-component", "-1"], "--source-component: expected an id in 1..255"),
-        (["sim", "missions/cmac_jump.waypoints", "--seed", "-1"], "--seed: expected a whole number >= 0, got '-1'"),
+        (["arm", "--source-system", "300"], "--source-system: expected a whole number in 1..255 (a MAVLink id; 0 addresses everyone), got '300'"),
+        (["mode", "HOLD", "--source-component", "-1"], "--source-component: expected a whole number in 1..255"),
+        (["sim", "missions/cmac_jump.waypoints", "--seed", "-1"], "--seed: expected a whole number >= 0 (a random seed), got '-1'"),
         (["tune", "default", "--scenarios", "open", "--seed", "x"], "--seed: expected a whole number, got 'x'"),
     ],
 )

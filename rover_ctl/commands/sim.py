@@ -10,17 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from rover_ctl.cli import seed
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value > 0 or math.isnan(value):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
+from rover_ctl.cli import positive, seed
 
 
 def add_parser(subparsers) -> None:
@@ -33,10 +23,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--rulebase", default="default", metavar="NAME|FILE", help="fuzzy rule base (default: default)")
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument("--lockstep", action="store_true", help="lockstep with the emulator (default; deterministic, as fast as possible)")
-    timing.add_argument("--speedup", type=_positive, metavar="X", help="free-running emulator at X times real time")
+    timing.add_argument("--speedup", type=positive, metavar="X", help="free-running emulator at X times real time")
     parser.add_argument("--out", type=Path, metavar="DIR", help="each sim writes a new numbered run folder here, with its logs and report, and DIR/latest (default runs/<mission>)")
     parser.add_argument("--json", action="store_true", help="print the metrics JSON on stdout (progress goes to stderr)")
-    parser.add_argument("--timeout-s", type=_positive, metavar="S",
+    parser.add_argument("--timeout-s", type=positive, metavar="S",
                         help="sim-time budget of the mission (default: twice its route at cruise speed plus its holds, at least 300)")  # fmt: skip
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="daemon config override (repeatable)")
     parser.add_argument("--signing-key", metavar="PASSPHRASE|@FILE",

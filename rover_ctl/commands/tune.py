@@ -9,19 +9,9 @@ import signal
 import sys
 from pathlib import Path
 
-from rover_ctl.cli import seed
+from rover_ctl.cli import count, seed
 
 SCHEDULER = re.compile(r"^(tcp|tls)://[^\s/:]+:\d{1,5}$")
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return value
 
 
 def _scheduler(text: str) -> str:
@@ -38,13 +28,13 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--scenarios", required=True, metavar="NAME,...",
                         help="open, scattered, walls, cul_de_sac, moving, crossing, head_on, overtaking, narrow_gap, "
                              "dense_clutter (comma-separated)")  # fmt: skip
-    parser.add_argument("--worlds", type=_count, default=4, metavar="N", help="training worlds per scenario (default 4)")
-    parser.add_argument("--generations", type=_count, default=30, metavar="G", help="CMA-ES generations (default 30)")
-    parser.add_argument("--population", type=_count, default=8, metavar="P", help="candidates per generation (default 8, at least 2)")
-    parser.add_argument("--holdout", type=_count, default=10, metavar="N", help="held-out worlds per scenario for the report (default 10)")
+    parser.add_argument("--worlds", type=count, default=4, metavar="N", help="training worlds per scenario (default 4)")
+    parser.add_argument("--generations", type=count, default=30, metavar="G", help="CMA-ES generations (default 30)")
+    parser.add_argument("--population", type=count, default=8, metavar="P", help="candidates per generation (default 8, at least 2)")
+    parser.add_argument("--holdout", type=count, default=10, metavar="N", help="held-out worlds per scenario for the report (default 10)")
     parser.add_argument("--seed", type=seed, default=1, help="seed of CMA-ES and of the world seeds (default 1)")
     parser.add_argument("--scheduler", type=_scheduler, metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a local cluster)")
-    parser.add_argument("--workers", type=_count, metavar="N", help="local cluster workers (default: one per core)")
+    parser.add_argument("--workers", type=count, metavar="N", help="local cluster workers (default: one per core)")
     parser.add_argument("--scale-outputs", action="store_true", help="also search one scale of the output sets")
     parser.add_argument("--out", type=Path, metavar="DIR", help="run folder: checkpoint, tuned.toml, report (default runs/tune/<rulebase>); "
                                                              "an existing checkpoint there is resumed")  # fmt: skip
