@@ -180,10 +180,12 @@ def _on_cluster(scheduler: str, jobs: list[tuple[str, str, int]], variants: dict
     ``remote_run`` is imported there by name), results in job order."""
     from distributed import Client
 
+    from rover_ctl.app.tune import SCHEDULER_TIMEOUT_S
+
     shipped = {key: (rulebase, list(overrides), Path(rulebase).read_text(encoding="utf-8") if rulebase and Path(rulebase).is_file() else None)
                for key, (rulebase, overrides) in variants.items()}  # fmt: skip
     try:
-        client = Client(scheduler, timeout="10s")
+        client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
     except (OSError, TimeoutError) as exc:
         raise ValueError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
     with client:

@@ -59,6 +59,8 @@ by 0.4 m on a 4 m rangefinder universe)."""
 REPAIR_PENALTY = 100.0
 """Score added per squared unit of distance between a vector and its repaired form."""
 LOOPBACK = "127.0.0.1"
+SCHEDULER_TIMEOUT_S = 10.0
+"""How long a client waits to reach ``--scheduler`` (Dask retries a refused connection until then)."""
 SEED_SPACE = 1_000_000
 """World seeds are drawn from 1..SEED_SPACE."""
 
@@ -143,7 +145,7 @@ class Cluster:
         self.cluster = None
         try:
             if scheduler:
-                self.client = Client(scheduler, timeout="10s")
+                self.client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
             else:
                 # Loopback only: the scheduler, the workers and the scheduler's small HTTP server (health and
                 # metrics routes, which it starts even without a dashboard) on a free port, no dashboard.

@@ -21,8 +21,11 @@ def test_a_world_runs_as_a_task_on_the_cluster_and_its_figures_come_back():
     assert row["runs"] == 1 and row["success_rate"] == 1.0
 
 
-def test_an_unreachable_scheduler_is_one_line_of_error(capsys):
+def test_an_unreachable_scheduler_is_one_line_of_error(capsys, monkeypatch):
     from bench.__main__ import main
+    from rover_ctl.app import tune
+
+    monkeypatch.setattr(tune, "SCHEDULER_TIMEOUT_S", 1.0)  # refused at once, retried until then
 
     with pytest.raises(SystemExit) as exit_info:
         main(["navigation", "--only", "open", "--worlds", "1", "--scheduler", "tcp://127.0.0.1:9"])
