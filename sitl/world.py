@@ -129,9 +129,12 @@ def load_world(path: str | Path) -> World:
     except UnicodeDecodeError:
         raise WorldError(f"{path}: not UTF-8 text") from None
     try:
-        doc = json.loads(text)
+        # integers as floats: one too large for a float reads as inf, which the checks refuse by field
+        doc = json.loads(text, parse_int=float)
     except json.JSONDecodeError as exc:
         raise WorldError(f"{path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    except RecursionError:
+        raise WorldError(f"{path}: not a world file: JSON nested too deeply") from None
     return parse_world(doc, str(path))
 
 
@@ -172,7 +175,7 @@ def parse_world(doc: object, source: str = "<world>") -> World:
 
 def _number(value: object, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise WorldError(f"{what} must be a number, got {value!r}")
+        raise WorldError(f"{what} must be a finite number, got {value!r}")
     return float(value)
 
 

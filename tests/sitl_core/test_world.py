@@ -92,6 +92,13 @@ def test_cmac_loop_world_has_a_moving_obstacle_and_passable_gaps():
     (collection(faults=[{"name": "meteor", "start_s": 1, "duration_s": 1}]), "faults[0]: unknown fault 'meteor'"),
     (collection(home=[149.1, -35.3, 584]), "home: expected [lon, lat, alt_m, heading_deg]"),
     ({"type": "Feature"}, "expected a GeoJSON FeatureCollection"),
+    (json.dumps(collection(circle_feature(0, 5, 1))).replace('"radius_m": 1', '"radius_m": ' + "9" * 400),
+     "feature 0: radius_m must be a finite number"),
+    (json.dumps(collection(circle_feature(0, 5, 1))).replace('"coordinates": [', '"coordinates": [' + "9" * 400 + ", ", 1),
+     "feature 0: Point longitude must be a finite number"),
+    (json.dumps(collection(faults=[{"name": "gps_outage", "start_s": 1, "duration_s": 1}])).replace('"start_s": 1', '"start_s": ' + "9" * 5000),
+     "faults[0]: gps_outage: 'start_s' must be a number"),
+    ("[" * 100_000 + "]" * 100_000, "not a world file: JSON nested too deeply"),
 ])
 def test_bad_world_files_give_one_line_errors_naming_file_and_feature(tmp_path, doc, message):
     path = write(tmp_path, doc)
