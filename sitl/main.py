@@ -59,9 +59,10 @@ def _home(text: str) -> Home:
         lat, lon, alt, heading = (float(p) for p in parts)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected LAT,LON,ALT,HEADING (4 numbers), got {text!r}") from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and 0 <= heading < 360 and math.isfinite(alt)):
-        raise argparse.ArgumentTypeError(f"{text!r}: need -90<=LAT<=90, -180<=LON<=180, 0<=HEADING<360")
-    return Home(lat, lon, alt, heading)
+    try:
+        return Home(lat, lon, alt, heading)
+    except WorldError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
 
 
 def _latlon_list(text: str) -> list[tuple[float, float]]:

@@ -41,6 +41,10 @@ class WorldError(ValueError):
     """A world file or description that cannot be used; the message names the file and feature."""
 
 
+HOME_ALT_RANGE_M = (-1000.0, 10000.0)
+"""The ground on Earth with a margin (Dead Sea shore -430 m, Everest 8849 m)."""
+
+
 @dataclass(frozen=True)
 class Home:
     """Where the rover boots: its position and initial compass heading (0 north, clockwise)."""
@@ -49,6 +53,12 @@ class Home:
     lon_deg: float
     alt_m: float = 0.0
     heading_deg: float = 0.0
+
+    def __post_init__(self) -> None:  # one check for --home and a world's home; NaN fails every comparison
+        low, high = HOME_ALT_RANGE_M
+        if not (-90 <= self.lat_deg <= 90 and -180 <= self.lon_deg <= 180 and low <= self.alt_m <= high
+                and 0 <= self.heading_deg < 360):
+            raise WorldError(f"need -90 <= lat <= 90, -180 <= lon <= 180, {low:g} <= alt <= {high:g}, 0 <= heading < 360")
 
 
 @dataclass(frozen=True)
@@ -192,7 +202,7 @@ def _parse_home(value: object) -> Home:
     if not isinstance(value, list) or len(value) != 4:
         raise WorldError(f"expected [lon, lat, alt_m, heading_deg], got {value!r}")
     lon, lat = _lonlat(value[:2], "position")
-    return Home(lat, lon, _number(value[2], "alt_m"), _number(value[3], "heading_deg") % 360.0)
+    return Home(lat, lon, _number(value[2], "alt_m"), _number(value[3], "heading_deg"))
 
 
 def _parse_feature(feature: object, index: int) -> Obstacle:

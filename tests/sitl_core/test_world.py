@@ -91,6 +91,9 @@ def test_cmac_loop_world_has_a_moving_obstacle_and_passable_gaps():
     (collection(faults=[{"name": "gps_outage", "start_s": 1}]), "faults[0]: gps_outage: 'duration_s' must be a number"),
     (collection(faults=[{"name": "meteor", "start_s": 1, "duration_s": 1}]), "faults[0]: unknown fault 'meteor'"),
     (collection(home=[149.1, -35.3, 584]), "home: expected [lon, lat, alt_m, heading_deg]"),
+    (collection(home=[149.1, -35.3, 584, 1e300]), "home: need"),  # the heading --home takes: 0 <= heading < 360
+    (collection(home=[149.1, -35.3, 584, -90]), "home: need"),
+    (collection(home=[149.1, -35.3, 1e7, 0]), "home: need"),
     ({"type": "Feature"}, "expected a GeoJSON FeatureCollection"),
     (json.dumps(collection(circle_feature(0, 5, 1))).replace('"radius_m": 1', '"radius_m": ' + "9" * 400),
      "feature 0: radius_m must be a finite number"),

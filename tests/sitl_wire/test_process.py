@@ -44,6 +44,8 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--home", "91,0,0,0"], "91,0,0,0"),
     (["--home", "1,2,3"], "LAT,LON,ALT,HEADING"),
     (["--home", "-95,2,3,0"], "-95,2,3,0"),
+    (["--home", "1,2,3e6,0"], "<= alt <="),  # GPS_RAW_INT carries millimetres in an int32
+    (["--home", "1,2,3,360"], "0 <= heading < 360"),
     (["--speedup", "0"], "positive"),
     (["--speedup", "2", "--lockstep"], "not allowed with"),
     (["--endpoint", "serial:/dev/null"], "unknown scheme"),
