@@ -100,14 +100,16 @@ def _probability(text: str) -> float:
     return value
 
 
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return value
+def _whole(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}")
+        return value
+    return parse
 
 
 def _non_negative(text: str) -> float:
@@ -136,10 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Skid-steer rover emulator on MAVLink (behaves like ArduPilot Rover in MANUAL).")
     parser.add_argument("--home", type=_home, help="LAT,LON,ALT,HEADING (default: the world's home, else CMAC)")
     parser.add_argument("--world", type=Path, help="GeoJSON world file (obstacles, optional home and fault schedule)")
-    parser.add_argument("--scatter", type=int, metavar="N", help="add N seeded random obstacles along --along")
+    parser.add_argument("--scatter", type=_whole(0), metavar="N", help="add N seeded random obstacles along --along")
     parser.add_argument("--along", type=_latlon_list, metavar='"LAT,LON;..."', help="the legs --scatter places obstacles on")
     parser.add_argument("--write-world", type=Path, metavar="OUT.geojson", help="write the world in use (with --scatter's obstacles)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of every random draw (default 1)")
+    parser.add_argument("--seed", type=_whole(0), default=1,  # numpy's generators take no negative seed
+                        help="seed of every random draw, >= 0 (default 1)")
     parser.add_argument("--endpoint", action="append", default=[], metavar="URL",
                         help=f"udpin:|udpout:|tcpin:|tcp:HOST:PORT, repeatable; the first is the controller's (default {DEFAULT_ENDPOINT})")
     parser.add_argument("--pty", action="store_true", help="also serve MAVLink on a pseudo-terminal and print 'PTY /dev/pts/N'")
@@ -148,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="carry the pty at N baud, 8N1 (N/10 bytes per sim second each way); default: no limit")
     line.add_argument("--byte-error", type=_probability, default=0.0, metavar="P",
                       help="probability that a byte on the line arrives changed (needs --baud)")
-    line.add_argument("--line-buffer-bytes", type=_count, default=DEFAULT_BUFFER_BYTES, metavar="N",
+    line.add_argument("--line-buffer-bytes", type=_whole(1), default=DEFAULT_BUFFER_BYTES, metavar="N",
                       help=f"bytes the line buffers each way before it drops (default {DEFAULT_BUFFER_BYTES}, a SiK radio)")
     line.add_argument("--line-stats", type=Path, metavar="FILE", help="write the line's counters as JSON at exit")
     timing = parser.add_mutually_exclusive_group()
@@ -171,8 +174,6 @@ def _world(args) -> World:
     if args.scatter is not None:
         if args.along is None:
             raise UsageError("--scatter needs --along \"LAT,LON;LAT,LON;...\"")
-        if args.scatter < 0:
-            raise UsageError(f"--scatter: expected a count >= 0, got {args.scatter}")
         world.obstacles.extend(scatter_obstacles(args.along, args.scatter, args.seed).obstacles)
     return world
 

@@ -53,6 +53,8 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--param", "SIM_NOPE=1"], "SIM_NOPE"),
     (["--param", "SIM_WHEEL_SLIP=3"], "outside"),
     (["--scatter", "3"], "--along"),
+    (["--scatter", "-1", "--along", "0,0;0,0.001"], ">= 0"),
+    (["--seed", "-1"], "--seed: expected a whole number >= 0"),  # numpy's generators refuse it
     (["--bogus"], "--bogus"),
     (["--set", "gps.nope=1"], "--set gps.nope: unknown numeric field"),
     (["--rangefinders", "three"], "invalid choice"),
