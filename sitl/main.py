@@ -37,6 +37,11 @@ another and start again)."""
 DEFAULT_HOME = Home(-35.363261, 149.165230, 584.0, 0.0)
 """ArduPilot's CMAC field, the default home of ArduPilot's own SITL."""
 DEFAULT_FRAME_S = 0.02
+FRAME_S_RANGE = (0.001, 1.0)
+"""From one physics substep (shorter frames only cost wall time) to 1 s (telemetry leaves and
+commands apply once a frame: a longer one starves the 50 Hz sensors and the controller)."""
+MIN_SPEEDUP = 0.01
+"""100 wall seconds per sim second; slower is a stalled emulator (1e-300 overflowed select's timeout)."""
 LINK_RNG_SALT = 0x4C494E4B
 """Mixed into --seed for the link-loss draws, so they do not alias the sensor noise streams."""
 DOWNLINK_RNG_SALT = 0x444F574E
@@ -85,9 +90,22 @@ def _positive(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value > 0 or math.isnan(value):
+    if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
+
+
+def _number_in(low: float, high: float):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not low <= value <= high:
+            wanted = f">= {low:g}" if math.isinf(high) else f"from {low:g} to {high:g}"
+            raise argparse.ArgumentTypeError(f"expected a number {wanted}, got {text!r}")
+        return value
+    return parse
 
 
 def _probability(text: str) -> float:
@@ -155,9 +173,11 @@ def build_parser() -> argparse.ArgumentParser:
                       help=f"bytes the line buffers each way before it drops (default {DEFAULT_BUFFER_BYTES}, a SiK radio)")
     line.add_argument("--line-stats", type=Path, metavar="FILE", help="write the line's counters as JSON at exit")
     timing = parser.add_mutually_exclusive_group()
-    timing.add_argument("--speedup", type=_positive, default=1.0, metavar="N", help="run at N x real time ('inf': as fast as possible)")
+    timing.add_argument("--speedup", type=_number_in(MIN_SPEEDUP, math.inf), default=1.0, metavar="N",
+                        help=f"run at N x real time, N >= {MIN_SPEEDUP:g} ('inf': as fast as possible)")
     timing.add_argument("--lockstep", action="store_true", help="advance a frame only when the controller answers its TIMESYNC marker")
-    parser.add_argument("--frame-s", type=_positive, default=DEFAULT_FRAME_S, metavar="S", help=f"frame length in sim seconds (default {DEFAULT_FRAME_S})")
+    parser.add_argument("--frame-s", type=_number_in(*FRAME_S_RANGE), default=DEFAULT_FRAME_S, metavar="S",
+                        help="frame length in sim seconds, {:g} to {:g} (default {:g})".format(*FRAME_S_RANGE, DEFAULT_FRAME_S))
     parser.add_argument("--truth-log", type=Path, metavar="FILE", help="write ground truth as JSON lines")
     parser.add_argument("--duration-s", type=_non_negative, metavar="S", help="stop after S sim seconds")
     parser.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE",

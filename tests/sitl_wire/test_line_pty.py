@@ -73,6 +73,7 @@ def run_line(tmp_path, seconds_sim: float, *flags: str, modest: bool, override=N
 @pytest.mark.parametrize(("flags", "needle"), [
     (["--pty", "--baud", "0"], "--baud: expected a positive number"),
     (["--pty", "--baud", "-9600"], "--baud: expected a positive number"),
+    (["--pty", "--baud", "inf"], "--baud: expected a positive number"),  # the line refused it with a traceback
     (["--pty", "--baud", "fast"], "--baud: expected a number"),
     (["--pty", "--baud", "57600", "--byte-error", "1"], "--byte-error: expected a probability"),
     (["--pty", "--baud", "57600", "--byte-error", "-0.1"], "--byte-error: expected a probability"),

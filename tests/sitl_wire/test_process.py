@@ -46,7 +46,11 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--home", "-95,2,3,0"], "-95,2,3,0"),
     (["--home", "1,2,3e6,0"], "<= alt <="),  # GPS_RAW_INT carries millimetres in an int32
     (["--home", "1,2,3,360"], "0 <= heading < 360"),
-    (["--speedup", "0"], "positive"),
+    (["--speedup", "0"], "--speedup: expected a number >= 0.01"),
+    (["--speedup", "1e-300"], ">= 0.01"),  # its wall time overflowed select's timeout
+    (["--frame-s", "1e-12"], "--frame-s: expected a number from 0.001 to 1"),
+    (["--frame-s", "1e300"], "from 0.001 to 1"),
+    (["--frame-s", "nan"], "from 0.001 to 1"),
     (["--speedup", "2", "--lockstep"], "not allowed with"),
     (["--endpoint", "serial:/dev/null"], "unknown scheme"),
     (["--endpoint", "tcpin:localhost"], "HOST:PORT"),
