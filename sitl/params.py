@@ -218,11 +218,62 @@ RANGEFINDER_SETS = {"default": default_rangefinders, "paper": paper_rangefinders
 and ``paper`` (front, back, left, right)."""
 
 
+@dataclass(frozen=True)
+class Limits:
+    """The values a numeric parameter may take: finite, above ``low`` (from it with ``low_included``)
+    and up to ``high``."""
+
+    low: float = 0.0
+    high: float = math.inf
+    low_included: bool = False
+
+    def admits(self, value: float) -> bool:
+        above = self.low <= value if self.low_included else self.low < value
+        return above and value <= self.high and math.isfinite(value)
+
+    def __str__(self) -> str:
+        low = f"{'>=' if self.low_included else '>'} {self.low:g}"
+        return low if math.isinf(self.high) else f"{low} and <= {self.high:g}"
+
+
+POSITIVE = Limits()
+"""The rule: a parameter is a magnitude (a rate, length, mass, time constant) that cannot be zero."""
+NON_NEGATIVE = Limits(low_included=True)
+NOISE = Limits(0.0, 100.0, low_included=True)
+"""A noise or bias spread in its field's unit (m, m/s, deg, deg/s): more is a broken sensor, and
+pushes the telemetry out of its MAVLink fields."""
+LIMITS: dict[str, Limits] = {
+    "motor.battery_v": Limits(0.0, 65.534),  # SYS_STATUS: millivolts in a uint16, 65535 = unknown
+    "motor.rotor_inertia_kgm2": NON_NEGATIVE,
+    "motor.viscous_nms_per_rad": NON_NEGATIVE,
+    "robot.wheel_inertia_kgm2": NON_NEGATIVE,
+    "gps.white_std_m": NOISE,
+    "gps.bias_std_m": NOISE,
+    "gps.dropout_prob": Limits(0.0, 1.0, low_included=True),
+    "gps.speed_std_mps": NOISE,
+    "gps.alt_std_m": NOISE,
+    "gps.satellites": Limits(0, 255, low_included=True),  # uint8 in GPS_RAW_INT
+    "gps.fix_type": Limits(0, 255, low_included=True),
+    # DISTANCE_SENSOR: centimetres in a uint16, and "no echo" is max + 1 cm
+    "rangefinder.min_m": Limits(0.0, 655.34, low_included=True),
+    "rangefinder.max_m": Limits(0.0, 655.34),
+    "rangefinder.fov_deg": Limits(0.0, 360.0, low_included=True),
+    "rangefinder.noise_std_m": NOISE,
+    "imu.compass_noise_std_deg": NOISE,
+    "imu.compass_bias_std_deg": NOISE,
+    "imu.gyro_noise_std_dps": NOISE,
+    "imu.gyro_bias_std_dps": NOISE,
+    "encoder.slip_noise_m2_per_m": NON_NEGATIVE,
+    "contact_release_m": NON_NEGATIVE,
+}
+"""The exceptions to POSITIVE, by ``SECTION.FIELD`` as ``--set`` names them."""
+
+
 def apply_override(params: SitlParams, assignment: str) -> None:
     """Apply one ``section.field=value`` (e.g. ``gps.white_std_m=2.5``) to ``params`` in place.
 
     Raises ValueError with a one-line message naming the key for an unknown section or field, a
-    value that is not a number, or a non-scalar field.
+    value that is not a number or is outside the field's LIMITS, or a non-scalar field.
     """
     import dataclasses
 
@@ -246,6 +297,9 @@ def apply_override(params: SitlParams, assignment: str) -> None:
         value = float(text)
     except ValueError:
         raise ValueError(f"{key}: expected a number, got {text.strip()!r}") from None
+    limits = LIMITS.get(".".join(path), POSITIVE)
+    if not limits.admits(value):
+        raise ValueError(f"{key}: expected a finite number {limits}, got {text.strip()!r}")
     if isinstance(current, int):
         if value != int(value):
             raise ValueError(f"{key}: expected a whole number, got {text.strip()!r}")

@@ -252,6 +252,30 @@ def test_model_parameters_are_overridden_by_name():
         ("gps.white_std_m=wide", "expected a number"),
         ("encoder.ticks_per_rev=1.5", "expected a whole number"),
         ("gps.white_std_m", "expected SECTION.FIELD=VALUE"),
+        ("gps.white_std_m=-1", r"expected a finite number >= 0 and <= 100, got '-1'"),  # numpy: "scale < 0"
+        ("gps.white_std_m=nan", "expected a finite number"),
+        ("gps.rate_hz=0", "expected a finite number > 0"),  # divided by
+        ("motor.inductance_h=inf", "expected a finite number > 0"),
+        ("gps.satellites=1e300", "<= 255"),  # a uint8 on the wire
+        ("rangefinder.max_m=1000", "<= 655.34"),
+        ("encoder.ticks_per_rev=0", "> 0"),
     ]:
         with pytest.raises(ValueError, match=message):
             apply_override(params, bad)
+
+
+def test_model_parameter_limits_name_fields_and_admit_the_defaults():
+    import dataclasses
+
+    from sitl.params import LIMITS, POSITIVE, SitlParams
+
+    params = SitlParams()
+    numeric = {}
+    for section in dataclasses.fields(params):
+        value = getattr(params, section.name)
+        fields = ({f"{section.name}.{f.name}": getattr(value, f.name) for f in dataclasses.fields(value)}
+                  if dataclasses.is_dataclass(value) else {section.name: value})
+        numeric |= {key: v for key, v in fields.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    assert set(LIMITS) <= set(numeric), "LIMITS names a field that --set cannot reach"
+    for key, default in numeric.items():
+        assert LIMITS.get(key, POSITIVE).admits(default), key

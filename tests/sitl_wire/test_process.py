@@ -61,6 +61,8 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--seed", "-1"], "--seed: expected a whole number >= 0"),  # numpy's generators refuse it
     (["--bogus"], "--bogus"),
     (["--set", "gps.nope=1"], "--set gps.nope: unknown numeric field"),
+    (["--set", "gps.white_std_m=-1"], "--set gps.white_std_m: expected a finite number >= 0"),
+    (["--set", "gps.white_std_m=nan"], "--set gps.white_std_m: expected a finite number"),
     (["--rangefinders", "three"], "invalid choice"),
 ])
 def test_bad_flags_give_one_line_error(capsys, flags: list[str], needle: str) -> None:
