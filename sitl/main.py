@@ -22,7 +22,7 @@ from sitl.clock import FrameClock, LockstepMarker, Pacer
 from sitl.endpoints import Endpoint, EndpointBusy, EndpointError, PtyEndpoint, mavlink, open_endpoint
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
 from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine
-from sitl.mavlink_vehicle import PARAM_NAMES, LinkParams, MavlinkVehicle
+from sitl.mavlink_vehicle import PARAM_NAMES, LinkParams, MavlinkVehicle, check_link_param
 from sitl.params import RANGEFINDER_SETS, SitlParams, apply_override
 from sitl.truthlog import TruthLog
 from sitl.vehicle import SimRover
@@ -146,9 +146,9 @@ def _param(text: str) -> tuple[str, float]:
     if not sep or name not in known:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE with NAME one of {', '.join(known)}, got {text!r}")
     try:
-        number = check_param(name, value) if name in FAULT_PARAMS else float(value)
-    except (FaultError, ValueError) as exc:
-        raise argparse.ArgumentTypeError(str(exc) if isinstance(exc, FaultError) else f"{name}: expected a number") from None
+        number = check_param(name, value) if name in FAULT_PARAMS else check_link_param(name, value)
+    except FaultError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return name, number
 
 

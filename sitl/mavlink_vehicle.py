@@ -71,6 +71,20 @@ class LinkParams:
 
 
 PARAM_NAMES = {"SYSID_MYGCS": "sysid_mygcs", "RC_OVERRIDE_TIME": "rc_override_time_s", "ARMING_CHECK": "arming_check"}
+PARAM_RANGES = {"SYSID_MYGCS": (1, 255), "RC_OVERRIDE_TIME": (0.0, 120.0), "ARMING_CHECK": (0, 1)}
+"""ArduPilot's ranges (ARMING_CHECK: the emulator's one check, on or off); an int bound: whole numbers."""
+
+
+def check_link_param(name: str, value) -> float:
+    """The value of one of PARAM_NAMES as float, or FaultError naming the parameter and what is wrong."""
+    low, high = PARAM_RANGES[name]
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise FaultError(f"{name}: expected a number, got {value!r}") from None
+    if not low <= number <= high or (isinstance(low, int) and not number.is_integer()):  # NaN fails the range
+        raise FaultError(f"{name}: expected {'a whole number' if isinstance(low, int) else 'a number'} {low:g}..{high:g}, got {value!r}")
+    return number
 
 
 @dataclass
@@ -132,7 +146,7 @@ class MavlinkVehicle:
         """Set a parameter (SIM_* faults apply to the rover at once); False if unknown."""
         if name in PARAM_NAMES:
             attr = PARAM_NAMES[name]
-            setattr(self, attr, type(getattr(self, attr))(value))
+            setattr(self, attr, type(getattr(self, attr))(check_link_param(name, value)))  # FaultError before any change
             return True
         if name in self.fault_values:
             self.rover.set_fault(name, value)  # FaultError on a bad value, before anything changes
@@ -197,7 +211,10 @@ class MavlinkVehicle:
     def _command(self, msg, t_s: float) -> list:
         command = msg.command
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            result = self._arm(msg.param1 >= 0.5, int(msg.param2) == FORCE_ARM_MAGIC)
+            result = self._arm(msg.param1 >= 0.5, msg.param2 == FORCE_ARM_MAGIC)  # as ArduPilot, a float compare
+        elif command in (mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE) \
+                and not (math.isfinite(msg.param1) and math.isfinite(msg.param2)):
+            result = mavlink.MAV_RESULT_FAILED  # a mode, a message id, an interval: NaN or inf is none of them
         elif command == mavlink.MAV_CMD_DO_SET_MODE:
             result = self._set_mode(int(msg.param1), int(msg.param2))
         elif command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:

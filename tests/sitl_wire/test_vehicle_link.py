@@ -163,6 +163,20 @@ def test_params_and_gps_disable_fault(client) -> None:
     assert [p.param_value for p in of_type(received, "PARAM_VALUE")] == [0.0]
 
 
+def test_nan_and_out_of_range_values_are_refused_and_the_emulator_lives_on(client) -> None:
+    """Each of these raised in the emulator (int() of NaN or inf) and ended it."""
+    client.set_param("SYSID_MYGCS", math.nan)
+    received = collect(client, 0.2)
+    assert [p.param_value for p in of_type(received, "PARAM_VALUE")] == [255.0]  # refused, old value echoed
+    assert any("SYSID_MYGCS" in t.text for t in of_type(received, "STATUSTEXT"))
+    custom = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert client.command(mavlink.MAV_CMD_DO_SET_MODE, custom, math.nan) == mavlink.MAV_RESULT_FAILED
+    assert client.command(mavlink.MAV_CMD_REQUEST_MESSAGE, math.inf) == mavlink.MAV_RESULT_FAILED
+    assert client.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE, math.nan) == mavlink.MAV_RESULT_FAILED
+    assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, math.nan) == mavlink.MAV_RESULT_ACCEPTED
+    assert of_type(collect(client, 1.1), "HEARTBEAT")
+
+
 def test_collision_reported_on_link_and_in_truth_log(tmp_path) -> None:
     lat = HOME[0] + 2.5 / M_PER_DEG_LAT
     world = {"type": "FeatureCollection", "home": [HOME[1], HOME[0], 584.0, 0.0], "features": [
