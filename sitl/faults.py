@@ -112,8 +112,9 @@ def parse_fault(entry: object) -> ScheduledFault:
     extra = sorted(set(entry) - {"name", "start_s", "duration_s", *required})
     if extra:
         raise FaultError(f"{name}: unexpected member(s) {', '.join(extra)}")
-    if numbers["start_s"] < 0 or numbers["duration_s"] <= 0:
-        raise FaultError(f"{name}: start_s must be >= 0 and duration_s > 0")
+    # the rover counts to the end in physics substeps: 1e308 + 1e308 overflowed it
+    if numbers["start_s"] < 0 or numbers["duration_s"] <= 0 or math.isinf(numbers["start_s"] + numbers["duration_s"]):
+        raise FaultError(f"{name}: start_s must be >= 0 and duration_s > 0, with a finite end")
     fault = ScheduledFault(name, numbers["start_s"], numbers["duration_s"], {k: numbers[k] for k in required})
     if "sensor_id" in fault.params and not (fault.params["sensor_id"].is_integer() and 0 <= fault.params["sensor_id"] < 32):
         raise FaultError(f"{name}: sensor_id must be an integer 0..31")

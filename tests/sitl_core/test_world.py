@@ -90,6 +90,7 @@ def test_cmac_loop_world_has_a_moving_obstacle_and_passable_gaps():
     (collection(circle_feature(0, 5, 1, id="a"), circle_feature(0, 9, 1, id="a")), "obstacle id 'a' is used twice"),
     (collection(faults=[{"name": "gps_outage", "start_s": 1}]), "faults[0]: gps_outage: 'duration_s' must be a number"),
     (collection(faults=[{"name": "meteor", "start_s": 1, "duration_s": 1}]), "faults[0]: unknown fault 'meteor'"),
+    (collection(faults=[{"name": "gps_outage", "start_s": 1e308, "duration_s": 1e308}]), "faults[0]: gps_outage: start_s must be"),
     (collection(home=[149.1, -35.3, 584]), "home: expected [lon, lat, alt_m, heading_deg]"),
     (collection(home=[149.1, -35.3, 584, 1e300]), "home: need"),  # the heading --home takes: 0 <= heading < 360
     (collection(home=[149.1, -35.3, 584, -90]), "home: need"),
