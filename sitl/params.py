@@ -258,6 +258,7 @@ LIMITS: dict[str, Limits] = {
     "rangefinder.min_m": Limits(0.0, 655.34, low_included=True),
     "rangefinder.max_m": Limits(0.0, 655.34),
     "rangefinder.fov_deg": Limits(0.0, 360.0, low_included=True),
+    "rangefinder.rays_per_beam": Limits(0, 1000),  # each ray is cast every sample: a billion exhausted memory
     "rangefinder.noise_std_m": NOISE,
     "imu.compass_noise_std_deg": NOISE,
     "imu.compass_bias_std_deg": NOISE,
@@ -265,6 +266,7 @@ LIMITS: dict[str, Limits] = {
     "imu.gyro_bias_std_dps": NOISE,
     "encoder.slip_noise_m2_per_m": NON_NEGATIVE,
     "contact_release_m": NON_NEGATIVE,
+    "physics_dt_s": Limits(1e-6, low_included=True),  # 1e-300 hung in one frame, deaf to SIGTERM
 }
 """The exceptions to POSITIVE, by ``SECTION.FIELD`` as ``--set`` names them."""
 

@@ -259,6 +259,8 @@ def test_model_parameters_are_overridden_by_name():
         ("gps.satellites=1e300", "<= 255"),  # a uint8 on the wire
         ("rangefinder.max_m=1000", "<= 655.34"),
         ("encoder.ticks_per_rev=0", "> 0"),
+        ("physics_dt_s=1e-300", ">= 1e-06"),  # hung
+        ("rangefinder.rays_per_beam=1e9", "<= 1000"),  # exhausted memory
     ]:
         with pytest.raises(ValueError, match=message):
             apply_override(params, bad)
