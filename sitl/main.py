@@ -18,7 +18,7 @@ import signal
 import sys
 from pathlib import Path
 
-from sitl.clock import FrameClock, LockstepMarker, Pacer
+from sitl.clock import MIN_SPEEDUP, FrameClock, LockstepMarker, Pacer
 from sitl.endpoints import Endpoint, EndpointBusy, EndpointError, PtyEndpoint, mavlink, open_endpoint
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
 from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine
@@ -40,8 +40,6 @@ DEFAULT_FRAME_S = 0.02
 FRAME_S_RANGE = (0.001, 1.0)
 """From one physics substep (shorter frames only cost wall time) to 1 s (telemetry leaves and
 commands apply once a frame: a longer one starves the 50 Hz sensors and the controller)."""
-MIN_SPEEDUP = 0.01
-"""100 wall seconds per sim second; slower is a stalled emulator (1e-300 overflowed select's timeout)."""
 LINK_RNG_SALT = 0x4C494E4B
 """Mixed into --seed for the link-loss draws, so they do not alias the sensor noise streams."""
 DOWNLINK_RNG_SALT = 0x444F574E

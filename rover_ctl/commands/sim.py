@@ -10,7 +10,8 @@ import sys
 import time
 from pathlib import Path
 
-from rover_ctl.cli import positive, seed
+from rover_ctl.cli import number_type, positive, seed
+from sitl.clock import MIN_SPEEDUP
 
 
 def add_parser(subparsers) -> None:
@@ -23,7 +24,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--rulebase", default="default", metavar="NAME|FILE", help="fuzzy rule base (default: default)")
     timing = parser.add_mutually_exclusive_group()
     timing.add_argument("--lockstep", action="store_true", help="lockstep with the emulator (default; deterministic, as fast as possible)")
-    timing.add_argument("--speedup", type=positive, metavar="X", help="free-running emulator at X times real time")
+    timing.add_argument("--speedup", type=number_type(float, MIN_SPEEDUP, math.inf, "a number", f">= {MIN_SPEEDUP:g}"), metavar="X",
+                        help="free-running emulator at X times real time ('inf': as fast as it goes)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="each sim writes a new numbered run folder here, with its logs and report, and DIR/latest (default runs/<mission>)")
     parser.add_argument("--json", action="store_true", help="print the metrics JSON on stdout (progress goes to stderr)")
     parser.add_argument("--timeout-s", type=positive, metavar="S",
