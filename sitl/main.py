@@ -138,7 +138,8 @@ def _non_negative(text: str) -> float:
     return value
 
 
-def _param(text: str) -> tuple[str, float]:
+def parse_param(text: str) -> tuple[str, float]:
+    """``--param NAME=VALUE`` (also checked by ``rover-ctl sim --sitl-param`` before it starts us)."""
     name, sep, value = text.partition("=")
     known = [*PARAM_NAMES, *FAULT_PARAMS]
     if not sep or name not in known:
@@ -178,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="frame length in sim seconds, {:g} to {:g} (default {:g})".format(*FRAME_S_RANGE, DEFAULT_FRAME_S))
     parser.add_argument("--truth-log", type=Path, metavar="FILE", help="write ground truth as JSON lines")
     parser.add_argument("--duration-s", type=_non_negative, metavar="S", help="stop after S sim seconds")
-    parser.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE",
+    parser.add_argument("--param", type=parse_param, action="append", default=[], metavar="NAME=VALUE",
                         help="set a parameter at start (SYSID_MYGCS, RC_OVERRIDE_TIME, ARMING_CHECK, SIM_*)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE", dest="overrides",
                         help="override an emulator model parameter of sitl/params.py, e.g. gps.white_std_m=2.5")

@@ -84,6 +84,13 @@ def _run(args: argparse.Namespace) -> int:
             load_world(args.world)
     except WorldError as exc:
         raise UserError(str(exc)) from None
+    from sitl.main import parse_param
+
+    for item in args.sitl_param:
+        try:
+            parse_param(item)
+        except argparse.ArgumentTypeError as exc:
+            raise UserError(f"--sitl-param {item}: {exc}") from None
     try:
         load_mission(args.mission)
         out = new_run_folder(args.out or Path("runs") / args.mission.stem, budget_mb)

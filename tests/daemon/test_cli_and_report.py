@@ -42,6 +42,8 @@ def test_run_without_a_vehicle_exits_69(tmp_path, caplog):
         (["sim", "/nonexistent/m.waypoints"], "/nonexistent/m.waypoints: no such file"),
         (["sim", "missions/cmac_jump.waypoints", "--world", "/nonexistent/w.geojson"], "--world /nonexistent/w.geojson: no such file"),
         (["sim", "missions/cmac_jump.waypoints", "--obstacles", "-2"], "--obstacles -2: expected a count >= 0"),
+        (["sim", "missions/cmac_jump.waypoints", "--sitl-param", "SIM_FOO=1"], "--sitl-param SIM_FOO=1: expected NAME=VALUE"),
+        (["sim", "missions/cmac_jump.waypoints", "--sitl-param", "SIM_LINK_LOSS=nan"], "--sitl-param SIM_LINK_LOSS=nan: SIM_LINK_LOSS"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(args, message, capsys):
