@@ -266,10 +266,9 @@ class SimRun:
         o = self.options
         cmd = ["--seed", str(o.seed), "--truth-log", str(self.out / "truth.jsonl")]
         cmd += ["--lockstep"] if o.lockstep else ["--speedup", f"{o.speedup:g}"]
-        heading = 0.0
+        heading = self.world.home.heading_deg if self.world is not None and self.world.home is not None else 0.0
         if o.world is not None:
             cmd += ["--world", str(o.world)]
-            heading = self.world.home.heading_deg if self.world is not None and self.world.home is not None else 0.0
         if self.home is not None:
             cmd += [f"--home={self.home.lat_deg},{self.home.lon_deg},{self.home_alt_m},{heading}"]
         if o.obstacles:
