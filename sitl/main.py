@@ -23,7 +23,7 @@ from sitl.endpoints import Endpoint, EndpointBusy, EndpointError, PtyEndpoint, m
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
 from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine
 from sitl.mavlink_vehicle import PARAM_NAMES, LinkParams, MavlinkVehicle, check_link_param
-from sitl.params import RANGEFINDER_SETS, SitlParams, apply_override
+from sitl.params import RANGEFINDER_SETS, SitlParams, apply_override, inconsistency
 from sitl.truthlog import TruthLog
 from sitl.vehicle import SimRover
 from sitl.world import Home, World, WorldError, load_world, scatter_obstacles
@@ -432,6 +432,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             print(f"{PROG}: error: --set {exc}", file=sys.stderr)
             return 2
+    if (why := inconsistency(params)) is not None:
+        print(f"{PROG}: error: --set {why}", file=sys.stderr)
+        return 2
     rover = SimRover(params, world, home, args.seed)
     vehicle = MavlinkVehicle(rover, LinkParams(), fault_params=FAULT_PARAMS)
     for name, value in args.param:

@@ -271,6 +271,14 @@ LIMITS: dict[str, Limits] = {
 """The exceptions to POSITIVE, by ``SECTION.FIELD`` as ``--set`` names them."""
 
 
+def inconsistency(params: SitlParams) -> str | None:
+    """Why fields that each passed their LIMITS cannot go together, or None."""
+    r = params.rangefinder
+    if not r.min_m < r.max_m:
+        return f"rangefinder.min_m {r.min_m:g} must be below rangefinder.max_m {r.max_m:g}"
+    return None
+
+
 def apply_override(params: SitlParams, assignment: str) -> None:
     """Apply one ``section.field=value`` (e.g. ``gps.white_std_m=2.5``) to ``params`` in place.
 

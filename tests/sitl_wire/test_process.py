@@ -65,6 +65,7 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--set", "gps.nope=1"], "--set gps.nope: unknown numeric field"),
     (["--set", "gps.white_std_m=-1"], "--set gps.white_std_m: expected a finite number >= 0"),
     (["--set", "gps.white_std_m=nan"], "--set gps.white_std_m: expected a finite number"),
+    (["--set", "rangefinder.min_m=5"], "--set rangefinder.min_m 5 must be below rangefinder.max_m 4"),
     (["--rangefinders", "three"], "invalid choice"),
 ])
 def test_bad_flags_give_one_line_error(capsys, flags: list[str], needle: str) -> None:
