@@ -37,6 +37,10 @@ from sitl.faults import FaultError, ScheduledFault, parse_fault
 from sitl.geodesy import LocalFrame
 
 
+MAX_OBSTACLE_SPEED_MPS = 50.0
+"""A moving obstacle's speed at most (a car on a road): 1e308 m/s put it at NaN a frame later."""
+
+
 class WorldError(ValueError):
     """A world file or description that cannot be used; the message names the file and feature."""
 
@@ -263,15 +267,18 @@ def _parse_motion(value: object) -> Motion:
         vel = value.get("velocity_mps")
         if not isinstance(vel, list) or len(vel) != 2:
             raise WorldError("motion velocity_mps must be [east, north]")
-        return Motion("velocity", velocity_en_mps=(_number(vel[0], "velocity east"), _number(vel[1], "velocity north")), start=start)
+        velocity = (_number(vel[0], "velocity east"), _number(vel[1], "velocity north"))
+        if math.hypot(*velocity) > MAX_OBSTACLE_SPEED_MPS:
+            raise WorldError(f"motion velocity_mps {math.hypot(*velocity):g} m/s is over {MAX_OBSTACLE_SPEED_MPS:g} m/s")
+        return Motion("velocity", velocity_en_mps=velocity, start=start)
     if kind == "waypoints":
         path = value.get("path")
         if not isinstance(path, list) or len(path) < 2:
             raise WorldError("motion path must list at least 2 [lon, lat] points")
         points = tuple(_lonlat(p, f"motion path point {i}") for i, p in enumerate(path))
         speed = _number(value.get("speed_mps"), "motion speed_mps")
-        if speed <= 0:
-            raise WorldError(f"motion speed_mps must be > 0, got {speed}")
+        if not 0 < speed <= MAX_OBSTACLE_SPEED_MPS:
+            raise WorldError(f"motion speed_mps must be > 0 and <= {MAX_OBSTACLE_SPEED_MPS:g}, got {speed:g}")
         loop = value.get("loop", True)
         if not isinstance(loop, bool):
             raise WorldError(f"motion loop must be true or false, got {loop!r}")
