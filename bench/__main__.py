@@ -89,7 +89,11 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         result["wall_s"] = round(time.perf_counter() - started, 1)
         path = RESULTS / f"{result.get('name', name)}.json"
         if path.exists() and "notes" not in result:
-            notes = json.loads(path.read_text()).get("notes")
+            try:
+                notes = json.loads(path.read_text()).get("notes")
+            except (OSError, ValueError, AttributeError) as exc:  # never lose a finished run to the old file
+                print(f"{path}: its notes could not be read ({exc}); writing without them", file=sys.stderr)
+                notes = None
             if notes:
                 result["notes"] = notes
         path.write_text(json.dumps(result, indent=2, default=float) + "\n")

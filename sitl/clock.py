@@ -11,11 +11,11 @@ import time
 
 NS_PER_S = 1_000_000_000
 MARKER_RESEND_S = 0.2
-MIN_SPEEDUP = 0.01
-"""100 wall seconds per sim second; slower is a stalled emulator (1e-300 overflowed select's timeout)."""
 """An unanswered lockstep marker is sent again after this many wall seconds (UDP may drop it, a
 byte error on a serial line may hide it): well under the daemon's vehicle-link timeout (0.4 s of
 silence), so a lost marker is not taken for a silent vehicle."""
+MIN_SPEEDUP = 0.01
+"""100 wall seconds per sim second; slower is a stalled emulator (1e-300 overflowed select's timeout)."""
 
 
 class FrameClock:

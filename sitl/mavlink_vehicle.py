@@ -71,8 +71,10 @@ class LinkParams:
 
 
 PARAM_NAMES = {"SYSID_MYGCS": "sysid_mygcs", "RC_OVERRIDE_TIME": "rc_override_time_s", "ARMING_CHECK": "arming_check"}
-PARAM_RANGES = {"SYSID_MYGCS": (1, 255), "RC_OVERRIDE_TIME": (0.0, 120.0), "ARMING_CHECK": (0, 1)}
-"""ArduPilot's ranges (ARMING_CHECK: the emulator's one check, on or off); an int bound: whole numbers."""
+PARAM_RANGES = {"SYSID_MYGCS": (1, 255), "RC_OVERRIDE_TIME": (-1.0, 120.0), "ARMING_CHECK": (0, 2**31 - 1)}
+"""ArduPilot's ranges; an int bound: whole numbers. RC_OVERRIDE_TIME -1: overrides never time out,
+0: overrides off. ARMING_CHECK is ArduPilot's bitmask of checks: any bit set turns on the
+emulator's one check (a 3D fix), 0 turns it off."""
 
 
 def check_link_param(name: str, value) -> float:
@@ -83,7 +85,8 @@ def check_link_param(name: str, value) -> float:
     except (TypeError, ValueError):
         raise FaultError(f"{name}: expected a number, got {value!r}") from None
     if not low <= number <= high or (isinstance(low, int) and not number.is_integer()):  # NaN fails the range
-        raise FaultError(f"{name}: expected {'a whole number' if isinstance(low, int) else 'a number'} {low:g}..{high:g}, got {value!r}")
+        kind = "a whole number" if isinstance(low, int) else "a number"
+        raise FaultError(f"{name}: expected {kind} {low}..{high}, got {value!r}")
     return number
 
 
@@ -287,7 +290,7 @@ class MavlinkVehicle:
     def apply_outputs(self, t_s: float) -> None:
         """Expire stale overrides and drive the motors: mixed RC when armed in MANUAL, else trim."""
         for channel, (_pwm, set_s) in list(self.overrides.items()):
-            if t_s - set_s >= self.rc_override_time_s:
+            if self.rc_override_time_s >= 0 and t_s - set_s >= self.rc_override_time_s:  # -1: never; 0: at once
                 del self.overrides[channel]
         trim = self.mixer.servo_trim_us
         if self.armed and self.mode == MODE_MANUAL:

@@ -76,6 +76,8 @@ def test_cli_help_and_bad_flag():
         (["mode", "HOLD", "--source-component", "-1"], "--source-component: expected a whole number in 1..255"),
         (["sim", "missions/cmac_jump.waypoints", "--seed", "-1"], "--seed: expected a whole number >= 0 (a random seed), got '-1'"),
         (["tune", "default", "--scenarios", "open", "--seed", "x"], "--seed: expected a whole number, got 'x'"),
+        (["tune", "default", "--scenarios", "open", "--seed", "4294967296"], "--seed: expected a whole number in 1..4294967295"),
+        (["tune", "default", "--scenarios", "open", "--seed", "0"], "0 would seed from the clock"),
     ],
 )
 def test_flag_values_out_of_range_are_one_line_before_anything_runs(capsys, args, message):

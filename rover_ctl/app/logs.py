@@ -66,10 +66,10 @@ def new_run_folder(root: str | Path, max_total_mb: float) -> Path:
     Raises LogDirError when ``root`` cannot be written."""
     root = Path(root).expanduser()
     latest = root / LATEST
-    if latest.exists() and not latest.is_symlink():  # checked first: nothing is made for a run that cannot start
-        raise LogDirError(f"log dir {root}: {latest} is not the link this program keeps there; move it away")
     run = pointer = None
     try:
+        if latest.exists() and not latest.is_symlink():  # checked first: nothing is made for a run that cannot start
+            raise LogDirError(f"log dir {root}: {latest} is not the link this program keeps there; move it away")
         root.mkdir(parents=True, exist_ok=True)
         existing = run_folders(root)
         number = int(existing[-1].name) + 1 if existing else 1

@@ -57,6 +57,7 @@ from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
 from rover_ctl.vocabulary import ARM_FORCE_MAGIC, MissionState, RoverMode  # noqa: E402
 from sitl.launch import SitlError, SitlProcess, free_port, signals_held, stop_process  # noqa: E402
 from sitl.launch import start as start_sitl  # noqa: E402
+from sitl.world import Home as EmulatorHome  # noqa: E402
 from sitl.world import WorldError, load_world  # noqa: E402
 
 ROVER_CTL = [sys.executable, "-m", "rover_ctl"]
@@ -124,6 +125,17 @@ class TruthTail:
             except ValueError:
                 continue  # a line cut by a crash
         return records
+
+
+def boot_altitude_m(mission: Mission) -> float:
+    """The altitude the emulator boots at for this mission's home: its own, or 0 when that is NaN
+    (MAVLink's "unset", which ``mission check`` accepts); WorldError when the emulator would
+    refuse it (its ``--home`` check)."""
+    if mission.home is None:
+        return 0.0
+    alt_m = mission.home.alt_m if math.isfinite(mission.home.alt_m) else 0.0
+    EmulatorHome(mission.home.lat_deg, mission.home.lon_deg, alt_m)
+    return alt_m
 
 
 class SimError(RuntimeError):
@@ -220,13 +232,12 @@ class SimRun:
         if not self.mission.items:
             raise SimError(f"{options.mission}: the mission has no items")
         self.home = self.mission.home
-        # A mission's home altitude may be NaN (MAVLink's "unset"): then 0, as the emulator gets it.
-        self.home_alt_m = self.home.alt_m if self.home and math.isfinite(self.home.alt_m) else 0.0
-        self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home_alt_m) if self.home else None
-        try:  # the emulator's own reader: its one-line error, before anything starts
+        try:  # the emulator's own checks: their one-line errors, before anything starts
+            self.home_alt_m = boot_altitude_m(self.mission)
             self.world = load_world(options.world) if options.world is not None else None
         except WorldError as exc:
             raise SimError(str(exc)) from None
+        self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home_alt_m) if self.home else None
         self.targets = {seq: (item.x, item.y) for seq, item in enumerate(self.mission.items, 1) if item.is_global and (item.x or item.y)}
         self.progress = Progress(waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items))
         self.world_path: Path | None = options.world

@@ -54,7 +54,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from rover_ctl.app.logs import LogDirError, new_run_folder
     from rover_ctl.app.report import ReportError
-    from rover_ctl.app.sim import Progress, SimError, SimOptions, simulate
+    from rover_ctl.app.sim import Progress, SimError, SimOptions, boot_altitude_m, simulate
     from rover_ctl.cli import UserError
     from rover_ctl.config import load_config
     from rover_ctl.mission.files import MissionFileError, load_mission
@@ -92,10 +92,12 @@ def _run(args: argparse.Namespace) -> int:
         except argparse.ArgumentTypeError as exc:
             raise UserError(f"--sitl-param {item}: {exc}") from None
     try:
-        load_mission(args.mission)
+        boot_altitude_m(load_mission(args.mission).mission)
         out = new_run_folder(args.out or Path("runs") / args.mission.stem, budget_mb)
     except (MissionFileError, LogDirError) as exc:
         raise UserError(str(exc)) from None
+    except WorldError as exc:
+        raise UserError(f"{args.mission}: home: the emulator cannot boot there: {exc}") from None
     options = SimOptions(
         mission=args.mission, out=out, world=args.world, obstacles=args.obstacles, seed=args.seed,
         rulebase=args.rulebase, lockstep=args.speedup is None, speedup=args.speedup or 1.0,

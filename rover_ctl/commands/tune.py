@@ -9,7 +9,9 @@ import signal
 import sys
 from pathlib import Path
 
-from rover_ctl.cli import count, seed
+from rover_ctl.cli import count, number_type
+
+CMA_SEED = number_type(int, 1, 2**32 - 1, "a whole number", "in 1..4294967295 (cma's seed range; 0 would seed from the clock)")
 
 SCHEDULER = re.compile(r"^(tcp|tls)://[^\s/:]+:\d{1,5}$")
 
@@ -32,7 +34,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--generations", type=count, default=30, metavar="G", help="CMA-ES generations (default 30)")
     parser.add_argument("--population", type=count, default=8, metavar="P", help="candidates per generation (default 8, at least 2)")
     parser.add_argument("--holdout", type=count, default=10, metavar="N", help="held-out worlds per scenario for the report (default 10)")
-    parser.add_argument("--seed", type=seed, default=1, help="seed of CMA-ES and of the world seeds (default 1)")
+    parser.add_argument("--seed", type=CMA_SEED, default=1, help="seed of CMA-ES and of the world seeds (default 1)")
     parser.add_argument("--scheduler", type=_scheduler, metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a local cluster)")
     parser.add_argument("--workers", type=count, metavar="N", help="local cluster workers (default: one per core)")
     parser.add_argument("--scale-outputs", action="store_true", help="also search one scale of the output sets")

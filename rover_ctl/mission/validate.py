@@ -54,9 +54,9 @@ INSTEAD = {
 }
 DEFAULT_INSTEAD = "the rover goes on with the next item"
 FLOAT32_MAX = 3.4028234663852886e38
-FLOAT32_TINY = 1.401298464324817e-45
-"""The smallest positive float32: anything smaller is sent as 0."""
 """Largest finite float32: MISSION_ITEM_INT's param1-4 and z are float32."""
+FLOAT32_TINY = 1.401298464324817e-45
+"""The smallest positive float32: a positive value below half of it is sent as 0."""
 INT32_MAX = 2**31 - 1
 """MISSION_ITEM_INT's x and y are int32 (scaled by the frame: 1e7 global, 1e4 local, else raw)."""
 KNOWN_FRAMES = frozenset(mav.enums["MAV_FRAME"])
@@ -161,7 +161,7 @@ def check_item(item: MissionItem, kind: MissionType, where: str) -> list[Problem
         if command not in FENCE_COMMANDS:
             errors.append(Problem(f"{where}: {describe(command)} is not a fence item", "command"))
         elif command in FENCE_CIRCLE_COMMANDS and not circle_radius_ok(item.param1):
-            errors.append(Problem(f"{where}: fence circle radius {item.param1:g} m must be > 0", "param1"))
+            errors.append(Problem(f"{where}: fence circle radius {item.param1:g} m must be > 0 (as the float32 sent)", "param1"))
     else:
         if command != Cmd.NAV_RALLY_POINT:
             errors.append(Problem(f"{where}: {describe(command)} is not a rally point", "command"))

@@ -71,6 +71,19 @@ def test_sim_refuses_a_bad_world_or_rulebase_before_making_a_run_folder(tmp_path
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_sim_refuses_a_home_the_emulator_cannot_boot_at_before_making_a_run_folder(tmp_path, capsys):
+    """mission check takes any float32 altitude; the emulator boots between -1000 and 10000 m."""
+    mission = tmp_path / "high.waypoints"
+    mission.write_text("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.363261\t149.165230\t12000\t1\n"
+                       "1\t0\t3\t16\t0\t0\t0\t0\t-35.3632\t149.1653\t0\t1\n")
+    assert main(["mission", "check", str(mission)]) == 0
+    out = tmp_path / "runs"
+    assert main(["sim", str(mission), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "home: the emulator cannot boot there" in err[0] and "10000" in err[0], err
+    assert not out.exists()
+
+
 def test_sigterm_stops_cleanly_with_neutral_first(tmp_path):
     from pymavlink import mavutil
 

@@ -40,7 +40,7 @@ EXPECTED = {
     ),
     "fence_vertex_count_mismatch.txt": ":2: inclusion polygon declares 4 vertices but has 3",
     "fence_polygon_too_few_vertices.txt": ":2: exclusion polygon vertex count 2 must be a whole number >= 3",
-    "fence_circle_zero_radius.txt": ":2: fence circle radius 0 m must be > 0",
+    "fence_circle_zero_radius.txt": ":2: fence circle radius 0 m must be > 0 (as the float32 sent)",
     "fence_latitude_out_of_range.txt": ":2: latitude -91 out of range [-90, 90]",
     "rally_wrong_column_count.txt": (
         ":1: expected 7 columns (RALLY latitude longitude altitude break_alt land_dir flags), got 4"

@@ -69,6 +69,19 @@ def test_a_latest_that_is_not_our_link_is_refused_and_nothing_is_left(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == [LATEST]
 
 
+def test_a_log_dir_that_cannot_be_searched_is_a_log_dir_error(tmp_path, monkeypatch):
+    """Path.exists() raises PermissionError under a folder we may not enter (Python 3.11): the
+    check for a stray ``latest`` must give the one-line error too, not a traceback."""
+    from pathlib import Path
+
+    def denied(self, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "exists", denied)
+    with pytest.raises(LogDirError, match="Permission denied"):
+        new_run_folder(tmp_path / "logs", max_total_mb=0)
+
+
 def test_log_clock_is_wall_time_until_lockstep_then_vehicle_time_continuously():
     wall = [1000.0]
     vehicle: list[float | None] = [None]

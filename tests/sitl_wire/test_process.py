@@ -57,7 +57,8 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--param", "SIM_NOPE=1"], "SIM_NOPE"),
     (["--param", "SIM_WHEEL_SLIP=3"], "outside"),
     (["--param", "SYSID_MYGCS=nan"], "SYSID_MYGCS: expected a whole number 1..255"),  # int(nan) raised
-    (["--param", "RC_OVERRIDE_TIME=-1"], "RC_OVERRIDE_TIME: expected a number 0..120"),
+    (["--param", "RC_OVERRIDE_TIME=-2"], "RC_OVERRIDE_TIME: expected a number -1.0..120.0"),
+    (["--param", "ARMING_CHECK=0.5"], "ARMING_CHECK: expected a whole number 0..2147483647"),
     (["--scatter", "3"], "--along"),
     (["--scatter", "-1", "--along", "0,0;0,0.001"], ">= 0"),
     (["--seed", "-1"], "--seed: expected a whole number >= 0"),  # numpy's generators refuse it

@@ -126,6 +126,17 @@ def test_override_times_out_and_needs_sysid_mygcs(client) -> None:
     assert all(m.servo1_raw == 1500 for m in of_type(received, "SERVO_OUTPUT_RAW"))
 
 
+def test_rc_override_time_minus_1_never_times_out_and_0_turns_overrides_off(client) -> None:
+    """ArduPilot's meanings of the two special values (scripts set -1 to drive without refreshing)."""
+    client.arm()
+    client.set_param("RC_OVERRIDE_TIME", -1)
+    received = collect(client, 2.0, lambda t: (1800, 1500) if t < 0.1 else None)
+    assert all(m.servo1_raw == 1785 for t, m in received if m.get_type() == "SERVO_OUTPUT_RAW" and t > 0.2)
+    client.set_param("RC_OVERRIDE_TIME", 0)
+    received = collect(client, 1.0, lambda t: (1800, 1500))
+    assert all(m.servo1_raw == 1500 for t, m in received if m.get_type() == "SERVO_OUTPUT_RAW" and t > 0.2)
+
+
 def test_hold_and_disarm_stop_the_motors(client) -> None:
     client.arm()
     assert of_type(collect(client, 0.5, lambda t: (1800, 1500)), "SERVO_OUTPUT_RAW")[-1].servo3_raw == 1785
