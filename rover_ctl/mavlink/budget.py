@@ -124,10 +124,13 @@ def streams(daemon: DaemonParams, failsafe: FailsafeParams, rangefinders: int, t
     """What the daemon reads, with its minimum and wanted rates (``rangefinders``: how many
     DISTANCE_SENSOR the vehicle sends per period). The odometry minimum is the failsafe's with a
     margin: below the failsafe's the rover holds, so planning that close would plan a rover that
-    holds on one late frame."""
+    holds on one late frame. GPS likewise: at least ``MIN_RATE_MARGIN`` fixes per
+    ``failsafe.gps_timeout_s``, or every fix would arrive just as the GPS failsafe (and the
+    pre-arm fix check) calls it lost."""
+    gps_min_hz = max(daemon.min_gps_rate_hz, MIN_RATE_MARGIN / failsafe.gps_timeout_s)
     out = [
         Stream(EXTRA1, ("WHEEL_DISTANCE", "ATTITUDE"), 1, MIN_RATE_MARGIN * failsafe.min_sensor_rate_hz, daemon.sensor_rate_hz),
-        Stream("GPS_RAW_INT", ("GPS_RAW_INT",), 1, daemon.min_gps_rate_hz, daemon.gps_rate_hz),
+        Stream("GPS_RAW_INT", ("GPS_RAW_INT",), 1, gps_min_hz, max(daemon.gps_rate_hz, gps_min_hz)),
         Stream("SYS_STATUS", ("SYS_STATUS",), 1, daemon.status_rate_hz, daemon.status_rate_hz),
     ]
     if rangefinders:

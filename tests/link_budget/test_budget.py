@@ -71,7 +71,7 @@ def test_every_plan_fits_or_says_why_and_never_goes_below_the_minimums(baud, ran
     assert (p.shortfall is None) == (p.bytes_per_s <= p.budget_bytes_per_s + 1e-6)
     assert p.rates_hz[budget.EXTRA1] == int(p.rates_hz[budget.EXTRA1])  # a stream rate is whole hertz
     assert p.rates_hz[budget.EXTRA1] >= budget.MIN_RATE_MARGIN * C.failsafe.min_sensor_rate_hz
-    assert p.rates_hz["GPS_RAW_INT"] >= C.daemon.min_gps_rate_hz
+    assert p.rates_hz["GPS_RAW_INT"] >= max(C.daemon.min_gps_rate_hz, budget.MIN_RATE_MARGIN / C.failsafe.gps_timeout_s)
     if rangefinders:
         assert p.rates_hz["DISTANCE_SENSOR"] >= C.daemon.min_rangefinder_rate_hz
     for name, hz in p.rates_hz.items():
