@@ -196,7 +196,7 @@ def test_only_the_invalid_parts_of_a_fence_are_left_out():
     items = [MissionItem(5004, param1=0, x=0, y=0), *square, MissionItem(5004, param1=3, x=1, y=1)]
     fence, ignored = Fence.checked(items, lambda lat, lon: (lon * 1e5, lat * 1e5))
     assert len(fence.exclusion_polygons) == 1 and fence.exclusion_circles == (Circle((1e5, 1e5), 3.0),)
-    assert ignored == ["fence item 0: fence circle radius 0 m must be > 0"]
+    assert ignored == ["fence item 0: fence circle radius 0 m must be > 0 (as the float32 sent)"]
 
 
 def test_reduced_visibility_graph_is_as_short_as_the_full_one():
