@@ -83,59 +83,22 @@ def _latlon_list(text: str) -> list[tuple[float, float]]:
     return points
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
+def _number(kind: type, low: float, high: float, wanted: str):
+    """An argparse type: ``kind(text)`` within ``[low, high]`` (NaN never is), else "expected WANTED"."""
 
-
-def _number_in(low: float, high: float):
-    def parse(text: str) -> float:
+    def parse(text: str):
         try:
-            value = float(text)
+            value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected {'a whole number' if kind is int else 'a number'}, got {text!r}") from None
         if not low <= value <= high:
-            wanted = f">= {low:g}" if math.isinf(high) else f"from {low:g} to {high:g}"
-            raise argparse.ArgumentTypeError(f"expected a number {wanted}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected {wanted}, got {text!r}")
         return value
+
     return parse
 
 
-def _probability(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0.0 <= value < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a probability 0 <= P < 1, got {text!r}")
-    return value
-
-
-def _whole(minimum: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}")
-        return value
-    return parse
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value >= 0 or math.isinf(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
-    return value
+FINITE_MAX = sys.float_info.max
 
 
 def parse_param(text: str) -> tuple[str, float]:
@@ -155,30 +118,30 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Skid-steer rover emulator on MAVLink (behaves like ArduPilot Rover in MANUAL).")
     parser.add_argument("--home", type=_home, help="LAT,LON,ALT,HEADING (default: the world's home, else CMAC)")
     parser.add_argument("--world", type=Path, help="GeoJSON world file (obstacles, optional home and fault schedule)")
-    parser.add_argument("--scatter", type=_whole(0), metavar="N", help="add N seeded random obstacles along --along")
+    parser.add_argument("--scatter", type=_number(int, 0, math.inf, "a whole number >= 0"), metavar="N", help="add N seeded random obstacles along --along")
     parser.add_argument("--along", type=_latlon_list, metavar='"LAT,LON;..."', help="the legs --scatter places obstacles on")
     parser.add_argument("--write-world", type=Path, metavar="OUT.geojson", help="write the world in use (with --scatter's obstacles)")
-    parser.add_argument("--seed", type=_whole(0), default=1,  # numpy's generators take no negative seed
+    parser.add_argument("--seed", type=_number(int, 0, math.inf, "a whole number >= 0"), default=1,  # numpy's generators take no negative seed
                         help="seed of every random draw, >= 0 (default 1)")
     parser.add_argument("--endpoint", action="append", default=[], metavar="URL",
                         help=f"udpin:|udpout:|tcpin:|tcp:HOST:PORT, repeatable; the first is the controller's (default {DEFAULT_ENDPOINT})")
     parser.add_argument("--pty", action="store_true", help="also serve MAVLink on a pseudo-terminal and print 'PTY /dev/pts/N'")
     line = parser.add_argument_group("serial line of --pty (docs/sitl.md, 'Serial line')")
-    line.add_argument("--baud", type=_positive, metavar="N",
+    line.add_argument("--baud", type=_number(float, math.ulp(0.0), FINITE_MAX, "a positive number"), metavar="N",
                       help="carry the pty at N baud, 8N1 (N/10 bytes per sim second each way); default: no limit")
-    line.add_argument("--byte-error", type=_probability, default=0.0, metavar="P",
+    line.add_argument("--byte-error", type=_number(float, 0.0, math.nextafter(1.0, 0.0), "a probability 0 <= P < 1"), default=0.0, metavar="P",
                       help="probability that a byte on the line arrives changed (needs --baud)")
-    line.add_argument("--line-buffer-bytes", type=_whole(1), default=DEFAULT_BUFFER_BYTES, metavar="N",
+    line.add_argument("--line-buffer-bytes", type=_number(int, 1, math.inf, "a whole number >= 1"), default=DEFAULT_BUFFER_BYTES, metavar="N",
                       help=f"bytes the line buffers each way before it drops (default {DEFAULT_BUFFER_BYTES}, a SiK radio)")
     line.add_argument("--line-stats", type=Path, metavar="FILE", help="write the line's counters as JSON at exit")
     timing = parser.add_mutually_exclusive_group()
-    timing.add_argument("--speedup", type=_number_in(MIN_SPEEDUP, math.inf), default=1.0, metavar="N",
+    timing.add_argument("--speedup", type=_number(float, MIN_SPEEDUP, math.inf, f"a number >= {MIN_SPEEDUP:g}"), default=1.0, metavar="N",
                         help=f"run at N x real time, N >= {MIN_SPEEDUP:g} ('inf': as fast as possible)")
     timing.add_argument("--lockstep", action="store_true", help="advance a frame only when the controller answers its TIMESYNC marker")
-    parser.add_argument("--frame-s", type=_number_in(*FRAME_S_RANGE), default=DEFAULT_FRAME_S, metavar="S",
+    parser.add_argument("--frame-s", type=_number(float, *FRAME_S_RANGE, "a number from {:g} to {:g}".format(*FRAME_S_RANGE)), default=DEFAULT_FRAME_S, metavar="S",
                         help="frame length in sim seconds, {:g} to {:g} (default {:g})".format(*FRAME_S_RANGE, DEFAULT_FRAME_S))
     parser.add_argument("--truth-log", type=Path, metavar="FILE", help="write ground truth as JSON lines")
-    parser.add_argument("--duration-s", type=_non_negative, metavar="S", help="stop after S sim seconds")
+    parser.add_argument("--duration-s", type=_number(float, 0.0, FINITE_MAX, "a finite number >= 0"), metavar="S", help="stop after S sim seconds")
     parser.add_argument("--param", type=parse_param, action="append", default=[], metavar="NAME=VALUE",
                         help="set a parameter at start (SYSID_MYGCS, RC_OVERRIDE_TIME, ARMING_CHECK, SIM_*)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE", dest="overrides",
