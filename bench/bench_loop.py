@@ -3,16 +3,17 @@ start-up.
 
 * Real time: ``missions/cmac_loop.waypoints`` against rover-sitl at speed-up 1 (six rangefinders)
   and against ArduPilot's firmware at speed-up 1 (layout "six"), a ground station attached (this
-  process, ``SimRun``/``FirmwareRun``), ``SAMPLES`` times each, alternating; the table shows each
-  vehicle's median run, and every run is listed. The daemon runs as ``python -m bench.loop_probe``, i.e.
-  ``rover-ctl run`` with its methods timed from outside (the daemon keeps no profiling code). The
-  window is the first ``WINDOW_S`` wall seconds after MISSION_START: CPU seconds per part divided by
-  the control steps in it, process CPU / wall, peak RSS (VmHWM) at its end.
+  process, ``SimRun``/``FirmwareRun``). The daemon runs as ``python -m bench.loop_probe``, i.e.
+  ``rover-ctl run`` under a wrapper (the daemon keeps no profiling code). The window is the first
+  ``WINDOW_S`` wall seconds after MISSION_START.
+  - The whole process: ``SAMPLES`` runs per vehicle, alternating, with nothing timed
+    (``--bare``): process CPU / wall, CPU per control step, peak RSS (VmHWM) at the window's end;
+    the table shows each vehicle's median run, and every run is listed.
+  - By part: one more run per vehicle with the daemon's methods timed from outside, CPU seconds
+    per part divided by the control steps. The timing costs CPU of its own (some 200 timed calls
+    per step), so this run's total is higher than the bare runs'; the difference is shown.
 * Start-up: ``rover-ctl --help`` wall time, and ``import rover_ctl.app.daemon`` time and RSS in a
   fresh interpreter, with which heavy packages it loaded.
-
-The timing itself costs CPU: the probe's calls per step times one timed call's cost (measured here)
-is shown beside the figures.
 """
 
 from __future__ import annotations
@@ -55,11 +56,13 @@ class _Probed:
     """A SimRun whose daemon runs under ``bench.loop_probe``."""
 
     probe_out: Path
+    bare: bool
 
     def _daemon_command(self) -> list[str]:
         cmd = super()._daemon_command()  # type: ignore[misc]
         assert cmd[: len(ROVER_CTL)] == ROVER_CTL
-        return [sys.executable, "-m", "bench.loop_probe", str(self.probe_out), *cmd[len(ROVER_CTL):]]
+        flags = ["--bare"] if self.bare else []
+        return [sys.executable, "-m", "bench.loop_probe", str(self.probe_out), *flags, *cmd[len(ROVER_CTL):]]
 
 
 class _ProbedSim(_Probed, SimRun):
@@ -70,9 +73,9 @@ class _ProbedFirmware(_Probed, FirmwareRun):
     pass
 
 
-def _drive(run_class: type, options: SimOptions, window_s: float) -> dict:
+def _drive(run_class: type, options: SimOptions, window_s: float, bare: bool) -> dict:
     probe_out = Path(options.out) / "probe.json"
-    run_class.probe_out = probe_out
+    run_class.probe_out, run_class.bare = probe_out, bare
     with run_class(options) as run:
         run.arm()
         run.start_mission()
@@ -85,27 +88,6 @@ def _drive(run_class: type, options: SimOptions, window_s: float) -> dict:
     record = json.loads(probe_out.read_text())
     record["waypoints_reached"] = reached
     return record
-
-
-def _timed_call_cost_s(n: int = 200_000) -> float:
-    """CPU seconds one probe-timed call adds (measured on an empty method)."""
-
-    class Empty:
-        def f(self) -> None:
-            pass
-
-    probe = loop_probe.Probe(Path(os.devnull))
-    plain = Empty()
-    started = time.process_time()
-    for _ in range(n):
-        plain.f()
-    base = time.process_time() - started
-    probe.wrap(Empty, "f", "loop_overhead")
-    probe.stack.append("loop_overhead")
-    started = time.process_time()
-    for _ in range(n):
-        plain.f()
-    return max(0.0, (time.process_time() - started - base) / n)
 
 
 def _startup() -> dict:
@@ -134,14 +116,13 @@ def _startup() -> dict:
     }  # fmt: skip
 
 
-def _summary(record: dict, call_cost_s: float) -> dict:
+def _summary(record: dict) -> dict:
     steps = max(record["steps"], 1)
-    per_step_ms = {k: 1e3 * v / steps for k, v in record["cpu_s"].items()}
     return {
         "steps": record["steps"], "wall_s": record["wall_s"], "steps_per_s": record["steps"] / record["wall_s"],
         "cpu_share_pct": 100 * record["process_cpu_s"] / record["wall_s"],
-        "cpu_per_step_ms": 1e3 * record["process_cpu_s"] / steps, "parts_ms": per_step_ms,
-        "probe_cost_per_step_ms": 1e3 * call_cost_s * sum(record["calls"].values()) / steps,
+        "cpu_per_step_ms": 1e3 * record["process_cpu_s"] / steps,
+        "parts_ms": {k: 1e3 * v / steps for k, v in record["cpu_s"].items()},
         "turns_per_step": record["calls"]["loop_overhead"] / steps,
         "peak_rss_mb": record["max_rss_kb"] / 1024, "waypoints_reached": record["waypoints_reached"],
     }  # fmt: skip
@@ -151,10 +132,12 @@ def _table(runs: dict[str, dict], startup: dict) -> str:
     labels = list(runs)
     lines = ["| per control step (CPU ms) | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
     for part in loop_probe.CATEGORIES:
-        lines.append(f"| {part.replace('_', ' ')} | " + " | ".join(f"{runs[k]['parts_ms'][part]:.3f}" for k in labels) + " |")
-    rows = [("**whole process, per step**", "cpu_per_step_ms", "**{:.3f}**"), ("of which the probe's own timing (estimate)", "probe_cost_per_step_ms", "{:.3f}"),
+        lines.append(f"| {part.replace('_', ' ')} | " + " | ".join(f"{runs[k]['by_part']['parts_ms'][part]:.3f}" for k in labels) + " |")
+    lines.append("| whole process, per step, in the timed run | " + " | ".join(f"{runs[k]['by_part']['cpu_per_step_ms']:.3f}" for k in labels) + " |")
+    lines.append("| loop turns per control step (timed run) | " + " | ".join(f"{runs[k]['by_part']['turns_per_step']:.2f}" for k in labels) + " |")
+    rows = [("**whole process, per step, untimed (median run)**", "cpu_per_step_ms", "**{:.3f}**"),
             ("**CPU share of one core**", "cpu_share_pct", "**{:.2f}%**"), ("**peak RSS**", "peak_rss_mb", "**{:.0f} MB**"),
-            ("control steps per wall second", "steps_per_s", "{:.1f}"), ("loop turns per control step", "turns_per_step", "{:.2f}"), ("control steps in the window", "steps", "{}"),
+            ("control steps per wall second", "steps_per_s", "{:.1f}"), ("control steps in the window", "steps", "{}"),
             ("waypoints reached in the window", "waypoints_reached", "{}")]  # fmt: skip
     for label, key, fmt in rows:
         lines.append(f"| {label} | " + " | ".join(fmt.format(runs[k][key]) for k in labels) + " |")
@@ -163,8 +146,7 @@ def _table(runs: dict[str, dict], startup: dict) -> str:
         "| start-up | figure |",
         "|---|---|",
         f"| `rover-ctl --help` wall (median of {STARTUP_REPEATS}) | {startup['help_s']:.3f} s (min {startup['help_min_s']:.3f} s) |",
-        *([f"| `rover-ctl --help` CPU, user + system (median; the wall time waits for a shared core) | {startup['help_cpu_s']:.3f} s |"]
-          if "help_cpu_s" in startup else []),
+        f"| `rover-ctl --help` CPU, user + system (median; the wall time waits for a shared core) | {startup['help_cpu_s']:.3f} s |",
         f"| `import rover_ctl.app.daemon` (median of {STARTUP_REPEATS}) | {startup['import_s']:.3f} s (min {startup['import_min_s']:.3f} s) |",
         f"| RSS after that import (bare interpreter: {startup['bare_python_rss_mb']:.0f} MB) | {startup['import_rss_mb']:.0f} MB |",
         f"| modules loaded by it | {startup['modules']} |",
@@ -192,7 +174,8 @@ def _compare(runs: dict[str, dict], startup: dict) -> str:
         return ""
     before = json.loads(BASELINE.read_text())
     lines = [f"Before and after issue 17's changes: before is commit {BASELINE_COMMIT} measured by this same benchmark "
-             f"on {before.get('date')} ({before.get('window_s'):g} s window), after is the table above.", "",
+             f"on {before.get('date')} ({before.get('window_s'):g} s window; it had only runs with the methods timed), "
+             "after is this run's timed run, so that like is compared with like.", "",
              "| figure | before | after |", "|---|---|---|"]  # fmt: skip
     for label in runs:
         old = before["runs"].get(label)
@@ -200,7 +183,8 @@ def _compare(runs: dict[str, dict], startup: dict) -> str:
             continue
         for name, key, fmt in (("CPU per control step", "cpu_per_step_ms", "{:.2f} ms"), ("estimator per step", None, "{:.3f} ms"),
                                ("CPU share of one core", "cpu_share_pct", "{:.1f}%"), ("peak RSS", "peak_rss_mb", "{:.0f} MB")):  # fmt: skip
-            a, b = (old["parts_ms"]["estimator"], runs[label]["parts_ms"]["estimator"]) if key is None else (old[key], runs[label][key])
+            timed = runs[label]["by_part"]
+            a, b = (old["parts_ms"]["estimator"], timed["parts_ms"]["estimator"]) if key is None else (old[key], timed[key])
             lines.append(f"| {label}: {name} | {fmt.format(a)} | {fmt.format(b)} |")
     old = before["startup"]
     lines += [f"| `rover-ctl --help` (median) | {old['help_s']:.3f} s | {startup['help_s']:.3f} s |",
@@ -210,25 +194,32 @@ def _compare(runs: dict[str, dict], startup: dict) -> str:
     return "\n".join(lines)
 
 
+def _vehicles(tmp: str, tag: str) -> list[tuple[str, type, SimOptions]]:
+    out: list[tuple[str, type, SimOptions]] = [
+        ("rover-sitl 1x", _ProbedSim, SimOptions(mission=MISSION, out=Path(tmp) / f"sitl{tag}", lockstep=False, speedup=1, timeout_s=400))]
+    if firmware_path() is not None:
+        out.append(("ArduPilot firmware 1x", _ProbedFirmware,
+                    FirmwareOptions(mission=MISSION, out=Path(tmp) / f"fw{tag}", lockstep=False, speedup=1, timeout_s=400,
+                                    rangefinders="six", config_overrides=list(WHEELS))))  # fmt: skip
+    return out
+
+
 def run(quick: bool) -> dict:
     window_s = 15.0 if quick else WINDOW_S
-    call_cost_s = _timed_call_cost_s()
     samples: dict[str, list[dict]] = {}
+    by_part: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for index in range(1 if quick else SAMPLES):
-            load = os.getloadavg()[0]
-            sim = SimOptions(mission=MISSION, out=Path(tmp) / f"sitl{index}", lockstep=False, speedup=1, timeout_s=400)
-            run_ = _summary(_drive(_ProbedSim, sim, window_s), call_cost_s)
-            samples.setdefault("rover-sitl 1x", []).append(run_ | {"load_average": load})
-            if firmware_path() is not None:
+            for label, run_class, options in _vehicles(tmp, str(index)):
                 load = os.getloadavg()[0]
-                fw = FirmwareOptions(mission=MISSION, out=Path(tmp) / f"fw{index}", lockstep=False, speedup=1, timeout_s=400,
-                                     rangefinders="six", config_overrides=list(WHEELS))  # fmt: skip
-                run_ = _summary(_drive(_ProbedFirmware, fw, window_s), call_cost_s)
-                samples.setdefault("ArduPilot firmware 1x", []).append(run_ | {"load_average": load})
-    runs = {label: sorted(runs_, key=lambda r: r["cpu_per_step_ms"])[(len(runs_) - 1) // 2] for label, runs_ in samples.items()}
+                summary = _summary(_drive(run_class, options, window_s, bare=True))
+                samples.setdefault(label, []).append(summary | {"load_average": load})
+        for label, run_class, options in _vehicles(tmp, "timed"):
+            by_part[label] = _summary(_drive(run_class, options, window_s, bare=False))
+    runs = {label: sorted(runs_, key=lambda r: r["cpu_per_step_ms"])[(len(runs_) - 1) // 2] | {"by_part": by_part[label]}
+            for label, runs_ in samples.items()}  # fmt: skip
     result = {"title": "Control loop on a companion computer: CPU per step, share, memory, start-up", "window_s": window_s,
-              "timed_call_cost_us": call_cost_s * 1e6, "runs": runs, "samples": samples, "startup": _startup()}  # fmt: skip
+              "runs": runs, "samples": samples, "startup": _startup()}  # fmt: skip
     result["markdown"] = markdown(result)
     return result
 
@@ -248,20 +239,23 @@ def markdown(result: dict) -> str:
     return "\n".join([
         f"`missions/cmac_loop.waypoints` in real time, six rangefinders, this process as the ground station; the first "
         f"{window_s:g} wall seconds after MISSION_START (the whole mission takes about 150 s). The daemon is "
-        "`rover-ctl run` under `bench/loop_probe.py`, which times its methods from outside: each part is the process "
-        "CPU time spent in it (nested parts subtracted), divided by the control steps (25 Hz target). *receive decode*: "
+        "`rover-ctl run` under `bench/loop_probe.py`. The bold rows are the whole process running untimed (`--bare`): "
+        "process CPU per control step (25 Hz target), CPU share (process CPU over wall seconds), peak RSS. The parts "
+        "come from one more run per vehicle with the daemon's methods timed from outside: each part is the process "
+        "CPU time spent in it (nested parts subtracted), divided by the control steps; that run's total is higher, "
+        "by what the timing itself costs. *receive decode*: "
         "the vehicle link's poll (socket read, MAVLink parse, typed readings); *autopilot*: the decision step "
         "(modes, failsafes, planner, fuzzy navigator, wheel control); *rc override*: commands to the vehicle; "
         "*gcs link*: ground-station requests, heartbeat, MISSION_CURRENT; *telemetry*: position, attitude, GPS, "
         "SYS_STATUS; *logging*: both tlogs, control.csv, events.jsonl; *loop overhead*: the rest of the turn. "
-        "CPU share is process CPU over wall seconds in the window (the machine's 2 cores are shared with the "
-        "emulator or firmware, this ground station and other work, so repeated runs differ by some tens of percent).",
+        "The machine's 2 cores are shared with the emulator or firmware, this ground station and other work, so "
+        "repeated runs differ by some tens of percent.",
         "",
         _table(runs, startup),
         "",
-        f"Each column is the median of {max(len(v) for v in result.get('samples', {'': [0]}).values())} runs by CPU per step "
-        "(rover-sitl and firmware alternating); every run's CPU per step, share of one core and the machine's "
-        "1-minute load average when it started:",
+        f"The bold rows are each vehicle's median of {max(len(v) for v in result.get('samples', {'': [0]}).values())} "
+        "untimed runs by CPU per step (rover-sitl and firmware alternating); every untimed run's CPU per step, share "
+        "of one core and the machine's 1-minute load average when it started:",
         "",
         _samples(result.get("samples", {})),
         "",
