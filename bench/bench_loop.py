@@ -11,7 +11,7 @@ start-up.
     the table shows each vehicle's median run, and every run is listed.
   - By part: one more run per vehicle with the daemon's methods timed from outside, CPU seconds
     per part divided by the control steps. The timing costs CPU of its own (some 200 timed calls
-    per step), so this run's total is higher than the bare runs'; the difference is shown.
+    per step), which this run's total includes; it is shown beside the untimed runs'.
 * Start-up: ``rover-ctl --help`` wall time, and ``import rover_ctl.app.daemon`` time and RSS in a
   fresh interpreter, with which heavy packages it loaded.
 """
@@ -242,8 +242,8 @@ def markdown(result: dict) -> str:
         "`rover-ctl run` under `bench/loop_probe.py`. The bold rows are the whole process running untimed (`--bare`): "
         "process CPU per control step (25 Hz target), CPU share (process CPU over wall seconds), peak RSS. The parts "
         "come from one more run per vehicle with the daemon's methods timed from outside: each part is the process "
-        "CPU time spent in it (nested parts subtracted), divided by the control steps; that run's total is higher, "
-        "by what the timing itself costs. *receive decode*: "
+        "CPU time spent in it (nested parts subtracted), divided by the control steps; that run's total includes "
+        "what the timing itself costs. *receive decode*: "
         "the vehicle link's poll (socket read, MAVLink parse, typed readings); *autopilot*: the decision step "
         "(modes, failsafes, planner, fuzzy navigator, wheel control); *rc override*: commands to the vehicle; "
         "*gcs link*: ground-station requests, heartbeat, MISSION_CURRENT; *telemetry*: position, attitude, GPS, "
