@@ -10,8 +10,8 @@ start-up.
     (``--bare``): process CPU / wall, CPU per control step, peak RSS (VmHWM) at the window's end;
     the table shows each vehicle's median run, and every run is listed.
   - By part: one more run per vehicle with the daemon's methods timed from outside, CPU seconds
-    per part divided by the control steps. The timing costs CPU of its own (some 200 timed calls
-    per step), which this run's total includes; it is shown beside the untimed runs'.
+    per part divided by the control steps. The timing costs CPU of its own (two clock reads per
+    timed call), which this run's total includes; it is shown beside the untimed runs'.
 * Start-up: ``rover-ctl --help`` wall time, and ``import rover_ctl.app.daemon`` time and RSS in a
   fresh interpreter, with which heavy packages it loaded.
 """
@@ -117,15 +117,19 @@ def _startup() -> dict:
 
 
 def _summary(record: dict) -> dict:
+    """The whole process's figures, and the split by part when the run was timed (an untimed run's
+    counters are all zero)."""
     steps = max(record["steps"], 1)
-    return {
+    summary = {
         "steps": record["steps"], "wall_s": record["wall_s"], "steps_per_s": record["steps"] / record["wall_s"],
         "cpu_share_pct": 100 * record["process_cpu_s"] / record["wall_s"],
         "cpu_per_step_ms": 1e3 * record["process_cpu_s"] / steps,
-        "parts_ms": {k: 1e3 * v / steps for k, v in record["cpu_s"].items()},
-        "turns_per_step": record["calls"]["loop_overhead"] / steps,
         "peak_rss_mb": record["max_rss_kb"] / 1024, "waypoints_reached": record["waypoints_reached"],
     }  # fmt: skip
+    if record["calls"]["loop_overhead"]:
+        summary["parts_ms"] = {k: 1e3 * v / steps for k, v in record["cpu_s"].items()}
+        summary["turns_per_step"] = record["calls"]["loop_overhead"] / steps
+    return summary
 
 
 def _table(runs: dict[str, dict], startup: dict) -> str:

@@ -9,8 +9,8 @@ it when the mission starts); SIGUSR2 writes OUT.json: CPU seconds per category, 
 timed calls per category (``loop_overhead``'s are loop turns), the window's wall and process CPU seconds, and the peak resident memory so far
 (``peak_rss_kb``).
 
-The timing costs CPU itself (two clock reads and a few list operations per timed call, some 200
-calls per step). ``--bare`` wraps nothing: the same window, steps, process CPU and peak memory,
+The timing costs CPU itself (two clock reads and a few list operations per timed call).
+``--bare`` wraps nothing: the same window, steps, process CPU and peak memory,
 with no category split, for the whole process's figures as it runs unobserved.
 """
 
