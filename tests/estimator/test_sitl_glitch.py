@@ -25,8 +25,14 @@ GLITCH_S = 30.0
 RECOVERY_S = 10.0
 CROSS_TRACK_LIMIT_M = 2.0
 RECOVERED_RATIO = 1.25
-"""After recovery the error's maximum over 20 s is within this factor of its maximum over the 20 s
-before the glitch (both are maxima of a noisy series: equal levels differ by a few per cent)."""
+"""After recovery the error's maximum over 20 s is within this factor of its maximum over the
+NORMAL_WINDOW_S before the glitch (both are maxima of a noisy series: equal levels differ by a few
+per cent)."""
+NORMAL_WINDOW_S = 60.0
+"""What "normal" is sampled over. 20 s was too small a sample of the level: that window's maximum
+was 1.12 m in one suite run (which then failed at 1.56 m after recovery) and 1.56-1.58 m in six
+others, whose minute before the glitch reached 1.76 m and whose error 0-5 s after the glitch's end
+was 0.83 m, rising to 1.4 m with the bias's wander, not falling from the glitch."""
 ACCEPTANCE_M = 2.0
 """ExecutorParams.acceptance_radius_m."""
 
@@ -94,7 +100,7 @@ def test_fifty_metre_glitch_for_thirty_seconds_keeps_the_rover_on_its_path(tmp_p
     for r in _control_rows(out):
         t_s = float(r["t_s"])
         error.append((t_s, math.dist((float(r["est_east_m"]), float(r["est_north_m"])), truth_en(t_s) + bias_en(t_s))))
-    normal_m = max(e for t, e in error if start_s - 20.0 <= t < start_s)
+    normal_m = max(e for t, e in error if start_s - NORMAL_WINDOW_S <= t < start_s)
     during_m = max(e for t, e in error if start_s <= t <= end_s)
     after_m = max(e for t, e in error if end_s + RECOVERY_S <= t <= end_s + RECOVERY_S + 20.0)
     print(f"glitch {start_s:.1f}-{end_s:.1f} s: cross-track {truth_off_m:.2f} m, beyond the GPS bias {cross_track_m:.2f} m, error before {normal_m:.2f} m, "
