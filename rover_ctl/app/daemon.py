@@ -448,7 +448,8 @@ class Daemon:
                 self.gcs.send_mission_item_reached(event.seq)
             elif isinstance(event, ArmRequest):
                 params = (1.0 if event.arm else 0.0, float(ARM_FORCE_MAGIC) if event.force else 0.0)
-                self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params, on_result=self._on_arm_result)
+                self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params,
+                                        on_result=lambda result, arm=event.arm: self._on_arm_result(result, arm))
             elif kind in ("mode", "complete"):
                 log.info("%s %s at t=%.2f s", kind, fields, now)
 
@@ -463,9 +464,14 @@ class Daemon:
         except OSError as exc:
             log.warning("%s: cannot save the mission's progress: %s", store.progress_path, exc)
 
-    def _on_arm_result(self, result) -> None:
+    def _on_arm_result(self, result, arm: bool) -> None:
         """The vehicle's answer to an arming or disarming: told, and acknowledged to the ground
-        stations that asked (FAILED when it gave none)."""
+        stations that asked (FAILED when it gave none). ACCEPTED means the vehicle has armed or
+        disarmed (ArduPilot answers after the change, not before), so the autopilot takes it at
+        once rather than at the vehicle's next heartbeat, up to a second later; the heartbeats
+        stay the truth from then on."""
+        if result.accepted:
+            self.autopilot.on_vehicle(arm)
         unanswered = result.result == NO_ANSWER
         if not result.accepted:
             text = ("Vehicle did not answer arming/disarming" if unanswered else

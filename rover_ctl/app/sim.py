@@ -445,9 +445,9 @@ class SimRun:
 
     def arm(self, timeout_s: float = 30.0, force: bool = False) -> None:
         """Arm as soon as the daemon's and the vehicle's pre-arm checks pass (``force``: skip the
-        daemon's); a refusal is retried. Its ACK is the vehicle's answer; the daemon drives once the
-        vehicle's heartbeat says armed, so nothing waits here for the GCS heartbeat's flag (1 Hz of
-        wall time is many seconds of lockstep sim time)."""
+        daemon's); a refusal is retried. Its ACK is the vehicle's answer, on which the daemon drives,
+        so nothing waits here for the GCS heartbeat's flag (1 Hz of wall time is many seconds of
+        lockstep sim time)."""
         if not self.wait_for(lambda p: p.position_en is not None, wall_timeout_s=timeout_s):
             raise SimError(f"no position from the daemon within {timeout_s:g} s: {self.progress.last_text}")
         deadline = time.monotonic() + timeout_s

@@ -6,7 +6,8 @@ come in as values, and what to do goes out as a command and typed events
 
 Inputs, from the shell:
     set_home(home, frame)        the first GPS fix: the local frame the mission is placed in
-    on_vehicle(armed)            the vehicle's HEARTBEAT armed flag (the truth about arming)
+    on_vehicle(armed)            the vehicle's HEARTBEAT armed flag (the truth about arming), and its
+                                 ACCEPTED answer to an arming or disarming the moment it comes
     on_wheels(WheelDistance)     every wheel reading (the wheel-speed meter of the PI loop, the
                                  wheel-map check)
     on_attitude(Attitude)        every ATTITUDE (the wheel-map check's gyro)

@@ -26,8 +26,8 @@ test (tests/tune/test_episode.py) states:
 - the ground station is this loop: it arms as soon as the autopilot's and the vehicle's pre-arm
   checks pass (asking again at each step) and starts the mission at once (``rover-ctl sim``
   retries arming every 0.2 wall seconds, which in lockstep is a variable number of sim seconds);
-  the vehicle's armed flag reaches the autopilot with the next 1 Hz heartbeat, as it does over
-  the wire;
+  an arming the vehicle accepts reaches the autopilot at once (the daemon takes the vehicle's
+  ACCEPTED as armed), and from then on the armed flag with each 1 Hz heartbeat, as over the wire;
 - measured link rates are the emulator's stream rates (the daemon measures them).
 
 ``start_s``: the ground station arms and starts the mission no earlier than this sim time (a
@@ -304,6 +304,8 @@ class Episode:
             if isinstance(event, ArmRequest):
                 self.vehicle.handle(mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, float(event.arm),
                                                                      0.0, 0, 0, 0, 0, 0), t_s)  # fmt: skip
+                if self.vehicle.armed == event.arm:  # ACCEPTED: the daemon takes it at once
+                    self.autopilot.on_vehicle(event.arm)
             elif isinstance(event, ModeChanged) and event.mode == RoverMode.AUTO and self.auto_start_s is None:
                 self.auto_start_s = t_s
             elif isinstance(event, MissionComplete) and self.complete_s is None:

@@ -151,6 +151,44 @@ def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
         assert run.wait_for(lambda p: p.armed, wall_timeout_s=10.0)
 
 
+def test_an_accepted_arming_drives_at_once_not_at_the_next_heartbeat(tmp_path):
+    """In AUTO, disarmed, then armed: the vehicle's ACCEPTED answer means it has armed, so the
+    daemon drives from that frame on. It used to wait for the vehicle's next HEARTBEAT (1 Hz)
+    saying so, up to a second later, a delay that also moved a lockstep run's encounter with an
+    obstacle that starts moving at arming by up to a second of its walk."""
+    import csv
+
+    from rover_ctl.vocabulary import mav
+
+    with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0)) as run:
+        assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
+        assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # the rangefinders known
+        run.start_mission()
+        run.arm()
+        assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False
+    out = tmp_path / "run"
+    tlog = mavutil.mavlink_connection(str(out / "vehicle.tlog"))
+    offset_s = ack_s = armed_heartbeat_s = None
+    while (msg := tlog.recv_match()) is not None:  # in lockstep, tlog stamps are vehicle time plus one offset
+        if msg.get_srcSystem() != 1:
+            continue
+        kind = msg.get_type()
+        if kind == "ATTITUDE" and ack_s is None:
+            offset_s = msg._timestamp - msg.time_boot_ms / 1e3
+        elif kind == "COMMAND_ACK" and msg.command == mav.MAV_CMD_COMPONENT_ARM_DISARM and msg.result == mav.MAV_RESULT_ACCEPTED:
+            ack_s = msg._timestamp
+        elif kind == "HEARTBEAT" and ack_s is not None and msg.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED:
+            armed_heartbeat_s = msg._timestamp
+            break
+    assert None not in (offset_s, ack_s, armed_heartbeat_s), (offset_s, ack_s, armed_heartbeat_s)
+    ack_s, armed_heartbeat_s = ack_s - offset_s, armed_heartbeat_s - offset_s
+    rows = list(csv.DictReader((out / "control.csv").open()))
+    armed_s = next(float(r["t_s"]) for r in rows if r["armed"] == "1")
+    throttle = next(r for r in rows if float(r["t_s"]) >= armed_s and r["throttle_us"])
+    assert ack_s - 0.02 <= armed_s <= ack_s + 0.1, (ack_s, armed_s, armed_heartbeat_s)
+    assert float(throttle["t_s"]) <= ack_s + 0.1 and int(throttle["throttle_us"]) > 1500, throttle
+
+
 def test_the_daemon_refuses_arming_without_a_recent_fix(tmp_path):
     """The daemon's own pre-arm check: after a GPS dropout its estimator still has a position
     (dead reckoning), but arming now would start the mission blind; refused with its reason,

@@ -14,14 +14,10 @@ from rover_ctl.app.sim import SimOptions, simulate
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
 from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
-from rover_ctl.tuning.scenarios import scenarios
+from rover_ctl.tuning.scenarios import CRUISE_MPS, START_LAG_S, scenarios  # the pedestrian is timed as the benchmark's traffic
 from rover_ctl.vocabulary import Cmd
 
 HOME = (-35.363261, 149.165230, 584.0)
-CRUISE_MPS = 1.2
-"""executor.cruise_speed_mps, the default the crossing is timed for."""
-START_LAG_S = 1.5
-"""From arming to cruise speed on the first leg (as bench/bench_navigation.py)."""
 
 pytestmark = pytest.mark.sitl
 
