@@ -2,7 +2,8 @@
 
 ``setup PASSPHRASE`` writes the key (SHA-256 of the passphrase, as MAVProxy's ``signing setup``
 and QGroundControl make it) to ``gcs.signing_key_path`` (mode 0600, atomically); ``remove``
-deletes it. A running daemon reads the key when it starts.
+deletes it. Both refuse a path that holds anything but a key (a mission file given by mistake).
+A running daemon reads the key when it starts.
 """
 
 from __future__ import annotations
@@ -59,9 +60,13 @@ def cmd_setup(args: argparse.Namespace) -> int:
 
 
 def cmd_remove(args: argparse.Namespace) -> int:
+    from rover_ctl.mavlink.signing import SigningError
+
     store = _store(args)
     try:
         removed = store.remove_key()
+    except SigningError as exc:
+        raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"{store.key_path}: {exc}") from None
     print(f"signing key removed: {store.key_path}" if removed else f"no signing key at {store.key_path}: nothing to remove")

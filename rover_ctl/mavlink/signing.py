@@ -37,11 +37,17 @@ from typing import Callable
 from pymavlink.dialects.v20.ardupilotmega import MAVLinkSigning
 
 from rover_ctl.config import GcsParams
+from rover_ctl.inputfile import FileTooLarge, read_text
 from rover_ctl.vocabulary import Severity, mav
 
 log = logging.getLogger(__name__)
 
 KEY_BYTES = 32
+_NOT_A_KEY = object()
+"""``KeyStore._read_key``'s answer for a file that holds something else."""
+KEY_FILE_MAX_BYTES = 4096
+"""A key file is 65 bytes (64 hex digits and a newline); more is not one. Reads stop here, so a
+device or a huge file given as the key file cannot stall a command."""
 EPOCH_2015_UNIX_S = 1420070400
 """MAVLink signing timestamps count from 2015-01-01 00:00 UTC."""
 TICKS_PER_S = 100_000
@@ -66,7 +72,11 @@ def key_from_passphrase(passphrase: str) -> bytes:
     (MAVProxy encodes ASCII; UTF-8 is the same for an ASCII passphrase)."""
     if not passphrase:
         raise SigningError("signing passphrase: must not be empty")
-    return hashlib.sha256(passphrase.encode("utf-8")).digest()
+    try:
+        encoded = passphrase.encode("utf-8")
+    except UnicodeEncodeError:  # bytes from the command line that are not UTF-8 (surrogate escapes)
+        raise SigningError("signing passphrase: not valid UTF-8 text (a ground station could not type it)") from None
+    return hashlib.sha256(encoded).digest()
 
 
 def clock_ticks(unix_s: float | None = None) -> int:
@@ -108,33 +118,57 @@ class KeyStore:
     def load_key(self) -> bytes | None:
         """The key, or None if there is no key file. A damaged file is an error, never "no key":
         that would silently turn authentication off."""
-        try:
-            text = self.key_path.read_text(encoding="ascii").strip()
-        except FileNotFoundError:
+        key = self._read_key()
+        if key is None:
             return None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise SigningError(f"{self.key_path}: cannot read signing key: {exc}") from None
-        try:
-            key = bytes.fromhex(text)
-        except ValueError:
-            key = b""
-        if len(key) != KEY_BYTES:
+        if key is _NOT_A_KEY:
             raise SigningError(f"{self.key_path}: not a signing key (expected {2 * KEY_BYTES} hex digits)")
         mode = self.key_path.stat().st_mode & 0o777
         if mode & 0o077:
             raise SigningError(f"{self.key_path}: signing key readable by others (mode {mode:o}); chmod 600 it")
         return key
 
+    def _read_key(self) -> bytes | object | None:
+        """The key file's key; None if there is no file, _NOT_A_KEY if it holds something else."""
+        try:
+            text = read_text(self.key_path, KEY_FILE_MAX_BYTES, encoding="ascii")
+        except FileNotFoundError:
+            return None
+        except (FileTooLarge, UnicodeDecodeError):
+            return _NOT_A_KEY
+        except OSError as exc:
+            raise SigningError(f"{self.key_path}: cannot read signing key: {exc}") from None
+        try:
+            key = bytes.fromhex(text.strip())
+        except ValueError:
+            return _NOT_A_KEY
+        return key if len(key) == KEY_BYTES else _NOT_A_KEY
+
+    def _refuse_unless_key(self, doing: str) -> bool:
+        """False if there is no file; raises if the path holds anything but a signing key (a
+        mission, a config given by mistake): it is not ours to overwrite or delete."""
+        if not self.key_path.exists() and not self.key_path.is_symlink():
+            return False
+        if self.key_path.is_dir():
+            raise SigningError(f"{self.key_path}: is a directory, not a signing key")
+        if self._read_key() is _NOT_A_KEY:
+            raise SigningError(f"{self.key_path}: exists and is not a signing key ({2 * KEY_BYTES} hex digits): refusing to {doing} it")
+        return True
+
     def save_key(self, key: bytes) -> None:
+        """Write ``key``, replacing an older key; a file there that is not a key is refused."""
         if len(key) != KEY_BYTES:
             raise SigningError(f"signing key must be {KEY_BYTES} bytes, got {len(key)}")
+        self._refuse_unless_key("overwrite")
         try:
             _write_atomic(self.key_path, key.hex() + "\n")
         except OSError as exc:
             raise SigningError(f"{self.key_path}: cannot write signing key: {exc}") from None
 
     def remove_key(self) -> bool:
-        """Delete the key file; False if there was none."""
+        """Delete the key file; False if there was none. A file that is not a key is refused."""
+        if not self._refuse_unless_key("delete"):
+            return False
         try:
             self.key_path.unlink()
         except FileNotFoundError:
@@ -346,10 +380,14 @@ def client_key(value: str | None) -> bytes | None:
     if value.startswith("@"):
         path = Path(value[1:]).expanduser()
         try:
-            text = path.read_text(encoding="utf-8").splitlines()
+            text = read_text(path, KEY_FILE_MAX_BYTES, encoding="utf-8").splitlines()
+        except FileTooLarge:
+            raise SigningError(f"--signing-key {value}: not a key file (larger than {KEY_FILE_MAX_BYTES} bytes)") from None
         except (OSError, UnicodeDecodeError) as exc:
             raise SigningError(f"--signing-key {value}: cannot read: {exc}") from None
         first = text[0].strip() if text else ""
+        if not first:
+            raise SigningError(f"--signing-key {value}: the file's first line is empty (it must hold a key or a passphrase)")
         try:
             key = bytes.fromhex(first)
         except ValueError:

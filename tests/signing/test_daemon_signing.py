@@ -129,7 +129,44 @@ def test_a_failed_key_write_leaves_no_copy_and_remove_says_when_there_was_none(t
     folder = tmp_path / "sign.key"
     folder.mkdir()
     assert main(["signing", "setup", PASSPHRASE, "--key-file", str(folder)]) == 2
-    assert capsys.readouterr().err.startswith(f"rover-ctl: error: {folder}: cannot write signing key")
+    assert capsys.readouterr().err == f"rover-ctl: error: {folder}: is a directory, not a signing key\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sign.key"] and not any(folder.iterdir())
     assert main(["signing", "remove", "--key-file", str(tmp_path / "none.key")]) == 0
     assert "no signing key at" in capsys.readouterr().out
+
+
+def test_signing_never_overwrites_or_deletes_a_file_that_is_not_a_key(tmp_path, capsys):
+    """``signing remove --key-file mission.waypoints`` deleted the mission; ``setup`` replaced it."""
+    from rover_ctl.cli import main
+
+    victim = tmp_path / "victim.waypoints"
+    victim.write_bytes(LOOP.read_bytes())
+    for action in (["setup", PASSPHRASE], ["remove"]):
+        assert main(["signing", *action, "--key-file", str(victim)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"rover-ctl: error: {victim}: exists and is not a signing key") and err.count("\n") == 1, err
+        assert victim.read_bytes() == LOOP.read_bytes()
+    key_file = tmp_path / "signing.key"
+    assert main(["signing", "setup", "first passphrase", "--key-file", str(key_file)]) == 0
+    assert main(["signing", "setup", PASSPHRASE, "--key-file", str(key_file)]) == 0  # a key is replaced
+    assert key_file.read_text().strip() == key_from_passphrase(PASSPHRASE).hex()
+    assert main(["signing", "remove", "--key-file", str(key_file)]) == 0 and not key_file.exists()
+
+
+def test_unusable_passphrases_and_key_files_are_one_line_errors(tmp_path, capsys):
+    from rover_ctl.cli import main
+
+    empty = tmp_path / "empty.key"
+    empty.write_text("\nsecond line\n")
+    cases = [
+        (["signing", "setup", "\udcff", "--key-file", str(tmp_path / "k")], "signing passphrase: not valid UTF-8 text"),
+        (["mission", "upload", str(LOOP), "--signing-key", f"@{empty}", "--connect", "udpout:127.0.0.1:9"],
+         f"--signing-key @{empty}: the file's first line is empty"),
+        (["mission", "upload", str(LOOP), "--signing-key", "@/dev/zero", "--connect", "udpout:127.0.0.1:9"],
+         "--signing-key @/dev/zero: cannot read: not a regular file"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith(f"rover-ctl: error: {message}") and err.count("\n") == 1, err
+    assert not (tmp_path / "k").exists()
