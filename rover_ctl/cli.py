@@ -12,6 +12,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import os
+import re
+import stat
 import sys
 from typing import Any, Callable
 
@@ -47,6 +50,36 @@ def number_type(kind: type, low: float, high: float, what: str, bounds: str) -> 
         return value
 
     return parse
+
+
+NET_SCHEMES = ("tcp", "tcpin", "udp", "udpin", "udpout", "udpbcast")
+"""pymavlink connection-string schemes taking HOST:PORT."""
+SERIAL_DEVICE = re.compile(r"^(/|\./|\.\./|COM\d+)[^,]*(,\d+)?$")
+"""A serial device path with an optional baud rate (``/dev/ttyACM0,115200``)."""
+
+
+def check_url(url: str, flag: str) -> None:
+    """Refuse a connection string pymavlink would misread before anything opens it: ``bogus``
+    would be opened as a serial port, ``nonsense:`` as UDP, a regular file as a log to replay
+    (and written to), ``ws:`` needs a package we do not ship, port 99999 raises in ``bind``.
+    Whether the peer is there is the link's business: that may change by the next try, and a
+    serial adapter not plugged in yet is not refused here."""
+    scheme, sep, rest = url.partition(":")
+    if sep and scheme in NET_SCHEMES:
+        host, sep, port = rest.rpartition(":")
+        if sep and host and port.isdigit() and 0 < int(port) < 65536:
+            return
+        raise UserError(f"{flag} {url}: expected {scheme}:HOST:PORT with PORT in 1..65535")
+    if SERIAL_DEVICE.match(url):
+        device = url.split(",", 1)[0]
+        try:
+            mode = os.stat(device).st_mode
+        except OSError:
+            return
+        if not stat.S_ISCHR(mode):
+            raise UserError(f"{flag} {url}: {device} is not a serial device (a character device such as /dev/ttyUSB0)")
+        return
+    raise UserError(f"{flag} {url!r}: expected SCHEME:HOST:PORT ({', '.join(NET_SCHEMES)}) or a serial device /dev/...[,BAUD]")
 
 
 MAX_WAIT_S = 86400.0

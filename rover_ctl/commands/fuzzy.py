@@ -20,6 +20,7 @@ from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rover_ctl import inputfile
 from rover_ctl.cli import UserError
 
 if TYPE_CHECKING:  # numpy and the engine load when a subcommand runs, not for --help
@@ -67,7 +68,7 @@ def _read_rows(args: argparse.Namespace, rb: RuleBase) -> tuple[list[str], list[
 
     where = args.input or "<stdin>"
     try:
-        text = Path(args.input).read_text(encoding="utf-8") if args.input else sys.stdin.read()
+        text = inputfile.read_text(args.input) if args.input else sys.stdin.read()
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{where}: cannot read: {exc}") from None
     reader = csv.reader(io.StringIO(text))

@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rover_ctl.cli import UserError, mavlink_id, wait_seconds
+from rover_ctl.cli import UserError, check_url, mavlink_id, wait_seconds
 from rover_ctl.config import GcsParams
 
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
@@ -99,6 +99,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 def _client(args: argparse.Namespace):
     from rover_ctl.mavlink.mission_client import MissionClient
 
+    check_url(args.connect, "--connect")
     params = GcsParams()
     if args.timeout is not None:
         if args.timeout <= 0:

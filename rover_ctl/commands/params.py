@@ -21,7 +21,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rover_ctl.cli import UserError, wait_seconds
+from rover_ctl import inputfile
+from rover_ctl.cli import UserError, check_url, wait_seconds
 from rover_ctl.config import ConfigError, GcsParams, load_config
 
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
@@ -91,6 +92,7 @@ def _client(args: argparse.Namespace):
 
     if args.timeout <= 0:
         raise UserError(f"--timeout {args.timeout:g}: must be positive")
+    check_url(args.connect, "--connect")
     params = GcsParams(client_connect_timeout_s=args.timeout)
     params.client_retries = max(1, round(args.timeout / params.client_retry_s) - 1)
     try:
@@ -141,7 +143,7 @@ def _import(args: argparse.Namespace) -> int:
 
     path = Path(args.file)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = inputfile.read_text(path)
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
     try:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import re
 import signal
 import sys
 
@@ -18,10 +17,6 @@ from rover_ctl.config import ConfigError, load_config
 
 EXIT_UNAVAILABLE = 69
 """sysexits EX_UNAVAILABLE: a link could not be opened (may work on a restart)."""
-NET_SCHEMES = ("tcp", "tcpin", "udp", "udpin", "udpout", "udpbcast")
-"""pymavlink connection-string schemes taking HOST:PORT."""
-SERIAL_DEVICE = re.compile(r"^(/|\./|\.\./|COM\d+)[^,]*(,\d+)?$")
-"""A serial device path with an optional baud rate (``/dev/ttyACM0,115200``)."""
 
 
 def add_parser(subparsers) -> None:
@@ -41,25 +36,8 @@ def add_parser(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def check_url(url: str, flag: str) -> None:
-    """Refuse a connection string pymavlink would misread (``bogus`` would be opened as a serial
-    port, ``nonsense:`` as UDP) before anything starts. Whether the peer is there is the link's
-    business: that may change by the next start."""
-    from rover_ctl.cli import UserError
-
-    scheme, sep, rest = url.partition(":")
-    if sep and scheme in NET_SCHEMES:
-        host, sep, port = rest.rpartition(":")
-        if sep and host and port.isdigit() and 0 < int(port) < 65536:
-            return
-        raise UserError(f"{flag} {url}: expected {scheme}:HOST:PORT")
-    if SERIAL_DEVICE.match(url):
-        return
-    raise UserError(f"{flag} {url!r}: expected SCHEME:HOST:PORT ({', '.join(NET_SCHEMES)}) or a serial device /dev/...[,BAUD]")
-
-
 def run(args: argparse.Namespace) -> int:
-    from rover_ctl.cli import UserError
+    from rover_ctl.cli import UserError, check_url
 
     overrides = list(args.set)
     if args.vehicle:

@@ -18,6 +18,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rover_ctl import inputfile
 from rover_ctl.config import RobotParams
 from rover_ctl.mission import plan, rally, wpl
 from rover_ctl.mission.model import Mission, MissionType
@@ -66,7 +67,7 @@ def load_mission(path: str | os.PathLike, max_speed_mps: float | None = None) ->
     path = Path(path)
     source = str(path)
     try:
-        data = path.read_bytes()
+        data = inputfile.read_bytes(path)
     except FileNotFoundError:
         raise MissionFileError([f"{source}: no such file"]) from None
     except IsADirectoryError:

@@ -44,12 +44,41 @@ def test_run_without_a_vehicle_exits_69(tmp_path, caplog):
         (["sim", "missions/cmac_jump.waypoints", "--obstacles", "-2"], "--obstacles -2: expected a count >= 0"),
         (["sim", "missions/cmac_jump.waypoints", "--sitl-param", "SIM_FOO=1"], "--sitl-param SIM_FOO=1: expected NAME=VALUE"),
         (["sim", "missions/cmac_jump.waypoints", "--sitl-param", "SIM_LINK_LOSS=nan"], "--sitl-param SIM_LINK_LOSS=nan: SIM_LINK_LOSS"),
+        # Files that are not files: /dev/zero was read until memory ran out.
+        (["mission", "check", "/dev/zero"], "/dev/zero: cannot read: not a regular file"),
+        (["run", "--config", "/dev/zero"], "/dev/zero: cannot read: not a regular file"),
+        (["params", "import", "/dev/zero"], "/dev/zero: cannot read: not a regular file"),
+        (["fuzzy", "eval", "--rulebase", "default", "--input", "/dev/zero"], "/dev/zero: cannot read: not a regular file"),
+        # Connection strings the clients handed to pymavlink as they came (a traceback from bind).
+        (["arm", "--connect", "udpin:127.0.0.1:99999"], "--connect udpin:127.0.0.1:99999: expected udpin:HOST:PORT with PORT in 1..65535"),
+        (["params", "show", "--connect", "tcp:127.0.0.1:0"], "--connect tcp:127.0.0.1:0: expected tcp:HOST:PORT"),
+        (["mission", "clear", "--connect", "ws:127.0.0.1:1"], "--connect 'ws:127.0.0.1:1': expected SCHEME:HOST:PORT"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(args, message, capsys):
     assert main(args) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_fifo_or_a_plain_file_where_a_device_or_file_belongs_is_one_line(tmp_path, capsys):
+    """A FIFO given as a mission waited for a writer for ever; a plain file as the vehicle link was
+    opened by pymavlink as a log to replay (the daemon waited for a heartbeat for ever) and as a
+    client's link was written to."""
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    plain = tmp_path / "victim.waypoints"
+    plain.write_text("QGC WPL 110\n")
+    cases = [
+        (["mission", "check", str(fifo)], f"{fifo}: cannot read: not a regular file"),
+        (["mode", "HOLD", "--connect", str(plain)], f"--connect {plain}: {plain} is not a serial device"),
+        (["run", "--vehicle", f"{plain},57600", "--mission-store", ""], f"--vehicle {plain},57600: {plain} is not a serial device"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith(f"rover-ctl: error: {message}") and err.count("\n") == 1, err
+    assert plain.read_text() == "QGC WPL 110\n"
 
 
 @pytest.mark.parametrize(
