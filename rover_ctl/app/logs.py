@@ -60,6 +60,13 @@ def folder_size_bytes(folder: Path) -> int:
     return total
 
 
+def _why(exc: OSError) -> str:
+    """A folder that cannot be made, said plainly ("File exists" was all mkdir said of a file)."""
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        return "a file is in the way: it, or a folder above it, is a file, not a folder"
+    return exc.strerror or str(exc)
+
+
 def new_run_folder(root: str | Path, max_total_mb: float) -> Path:
     """Create the next numbered run folder under ``root``, point ``root/latest`` at it and prune
     the oldest ones while the run folders together exceed ``max_total_mb`` (0: no limit).
@@ -91,7 +98,7 @@ def new_run_folder(root: str | Path, max_total_mb: float) -> Path:
                     leftover.unlink()
                 elif leftover is not None:
                     leftover.rmdir()  # only if still empty
-        raise LogDirError(f"log dir {root}: {exc.strerror or exc}") from None
+        raise LogDirError(f"log dir {root}: {_why(exc)}") from None
     prune_runs(root, max_total_mb, keep=run)
     return run
 
@@ -106,7 +113,7 @@ def given_run_folder(folder: str | Path) -> Path:
         probe.touch()
         probe.unlink()
     except OSError as exc:
-        raise LogDirError(f"log folder {folder}: {exc.strerror or exc}") from None
+        raise LogDirError(f"log folder {folder}: {_why(exc)}") from None
     return folder
 
 

@@ -71,6 +71,7 @@ def _read_rows(args: argparse.Namespace, rb: RuleBase) -> tuple[list[str], list[
         text = inputfile.read_text(args.input) if args.input else sys.stdin.read()
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{where}: cannot read: {exc}") from None
+    text = text.removeprefix("\ufeff")  # the byte-order mark spreadsheet programs put before the header
     reader = csv.reader(io.StringIO(text))
     try:
         header = [h.strip() for h in next(reader, [])]

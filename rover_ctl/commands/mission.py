@@ -162,6 +162,10 @@ def cmd_download(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".plan", ".waypoints", ".txt"):
         raise UserError(f"{out}: unknown extension {out.suffix!r}: use .plan, .waypoints or .txt")
+    if out.is_dir():  # checked before the transfer, not after it
+        raise UserError(f"{out}: is a folder; give a file name")
+    if not out.parent.is_dir():
+        raise UserError(f"{out}: {out.parent} is not an existing folder")
     mission = _run(args, lambda client, progress: client.download(progress))
     saved, left_out = mission, []
     if out.suffix.lower() != ".plan" and mission.items:

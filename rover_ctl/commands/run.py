@@ -40,9 +40,9 @@ def run(args: argparse.Namespace) -> int:
     from rover_ctl.cli import UserError, check_url
 
     overrides = list(args.set)
-    if args.vehicle:
+    if args.vehicle is not None:  # '' is a bad URL, not "the default"
         overrides.append(f"link.vehicle_url={args.vehicle}")
-    if args.gcs:
+    if args.gcs is not None:
         overrides.append(f"link.gcs_url={args.gcs}")
     if args.mission_store is not None:
         overrides.append(f"gcs.mission_store_path={args.mission_store}")

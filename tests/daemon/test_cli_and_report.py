@@ -53,6 +53,9 @@ def test_run_without_a_vehicle_exits_69(tmp_path, caplog):
         (["arm", "--connect", "udpin:127.0.0.1:99999"], "--connect udpin:127.0.0.1:99999: expected udpin:HOST:PORT with PORT in 1..65535"),
         (["params", "show", "--connect", "tcp:127.0.0.1:0"], "--connect tcp:127.0.0.1:0: expected tcp:HOST:PORT"),
         (["mission", "clear", "--connect", "ws:127.0.0.1:1"], "--connect 'ws:127.0.0.1:1': expected SCHEME:HOST:PORT"),
+        # Output places checked before anything runs (a download said so after the transfer).
+        (["mission", "download", "README.md/out.waypoints", "--connect", "udpin:127.0.0.1:9"], "README.md is not an existing folder"),
+        (["run", "--log-dir", "README.md", "--vehicle", "tcp:127.0.0.1:9"], "log dir README.md: a file is in the way"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(args, message, capsys):

@@ -30,6 +30,15 @@ def test_eval_file_to_file_keeps_columns_and_appends_outputs(tmp_path, capsys):
     assert float(rows[1]["right_motor"]) == pytest.approx(-1.59983265, abs=0.05)
 
 
+def test_eval_reads_a_csv_with_a_byte_order_mark(tmp_path, capsys):
+    """Spreadsheets save CSV with a BOM: it was read as part of the first column's name."""
+    source = tmp_path / "in.csv"
+    source.write_bytes(b"\xef\xbb\xbf" + "\n".join([HEADER, ROWS[0]]).encode())
+    code, out, err = run(["fuzzy", "eval", "--rulebase", "paper", "--input", str(source)], capsys)
+    assert (code, err) == (0, "")
+    assert out.splitlines()[0] == HEADER + ",left_motor,right_motor"
+
+
 def test_eval_stdin_stdout_with_explain(capsys, monkeypatch):
     code, out, _ = run(["fuzzy", "eval", "--rulebase", "paper", "--explain"], capsys, "\n".join([HEADER, ROWS[0]]), monkeypatch)
     assert code == 0

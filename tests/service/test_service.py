@@ -122,6 +122,7 @@ def test_daemon_tlog_of_a_lockstep_run_spans_sim_time(tmp_path):
         (["--gcs", "bogus"], "--gcs 'bogus': expected SCHEME:HOST:PORT"),
         (["--vehicle", "nonsense:"], "--vehicle 'nonsense:': expected SCHEME:HOST:PORT"),
         (["--gcs", "udpout:127.0.0.1:0"], "--gcs udpout:127.0.0.1:0: expected udpout:HOST:PORT"),
+        (["--vehicle", ""], "--vehicle '': expected SCHEME:HOST:PORT"),
         (["--config", "{tmp}/absent.toml"], "absent.toml: no such config file"),
         (["--config", "{tmp}/bad.toml"], "bad.toml: invalid TOML"),
         (["--config", "{tmp}"], "cannot read"),
