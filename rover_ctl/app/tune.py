@@ -44,6 +44,9 @@ from typing import Any, Callable
 
 import numpy as np
 
+from rover_ctl.config import NavigatorParams
+from rover_ctl.fuzzy import parse_rulebase
+from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.tuning import scenarios as scenario_defs
 from rover_ctl.tuning.episode import Outcome
 from rover_ctl.tuning.genome import Genome, load_document
@@ -62,7 +65,15 @@ LOOPBACK = "127.0.0.1"
 SCHEDULER_TIMEOUT_S = 10.0
 """How long a client waits to reach ``--scheduler`` (Dask retries a refused connection until then)."""
 SEED_SPACE = 1_000_000
-"""World seeds are drawn from 1..SEED_SPACE."""
+"""World seeds are drawn from 1..SEED_SPACE: ``worlds + holdout`` distinct ones at most."""
+MAX_BATCH = 100_000
+"""Most episodes submitted to the cluster at once (a generation's, or the held-out check's): each
+is a task the client and the scheduler hold until it is done."""
+MAX_GENERATIONS = 10_000
+"""Most generations of a run (CMA-ES settles a rule base's ~20 values in a few hundred; the
+checkpoint and the report keep a row per generation)."""
+WORKERS_PER_CORE = 4
+"""A local cluster has at most this many worker processes per core (each is a Python process)."""
 
 
 class TuneError(RuntimeError):
@@ -115,22 +126,42 @@ class Progress:
 
 
 def draw_seeds(seed: int, training: int, holdout: int) -> tuple[list[int], list[int]]:
-    """Distinct world seeds: ``training`` for the search, then ``holdout`` it never sees."""
+    """Distinct world seeds: ``training`` for the search, then ``holdout`` it never sees
+    (``check_options`` keeps ``training + holdout`` within ``SEED_SPACE``)."""
     drawn = random.Random(seed).sample(range(1, SEED_SPACE + 1), training + holdout)
     return drawn[:training], drawn[training:]
 
 
-def check_options(o: TuneOptions) -> None:
-    """Refuse what cannot run, before any cluster starts (TuneError, one line)."""
+def check_options(o: TuneOptions, cores: int | None = None) -> None:
+    """Refuse what cannot run, before any cluster starts (TuneError, one line). ``cores``: this
+    machine's (default ``os.cpu_count()``), which bounds ``workers``."""
     unknown = sorted(set(o.scenarios) - set(scenario_defs.NAMES))
     if unknown or not o.scenarios:
         raise TuneError(f"--scenarios: unknown {', '.join(unknown) or '(none given)'} (known: {', '.join(scenario_defs.NAMES)})")
+    twice = sorted({s for s in o.scenarios if o.scenarios.count(s) > 1})
+    if twice:
+        raise TuneError(f"--scenarios: {', '.join(twice)} given more than once")
     for name, value, low in (("--worlds", o.worlds, 1), ("--generations", o.generations, 1), ("--population", o.population, 2),
                              ("--holdout", o.holdout, 1)):  # fmt: skip
         if value < low:
             raise TuneError(f"{name} {value}: expected a whole number >= {low}")
-    if o.workers is not None and o.workers < 1:
-        raise TuneError(f"--workers {o.workers}: expected a whole number >= 1")
+    if o.generations > MAX_GENERATIONS:
+        raise TuneError(f"--generations {o.generations}: at most {MAX_GENERATIONS}")
+    if o.worlds + o.holdout > SEED_SPACE:
+        raise TuneError(f"--worlds {o.worlds} + --holdout {o.holdout}: more than the {SEED_SPACE} distinct world seeds there are "
+                        f"(seeds are drawn from 1..{SEED_SPACE})")  # fmt: skip
+    n = len(o.scenarios)
+    search = (o.population + 1) * n * o.worlds  # generation 1 also drives the source rule base
+    if search > MAX_BATCH:
+        raise TuneError(f"--population {o.population} x {n} scenario(s) x --worlds {o.worlds}: {search} episodes a generation "
+                        f"(with the source rule base's), at most {MAX_BATCH}")  # fmt: skip
+    if 2 * n * o.holdout > MAX_BATCH:
+        raise TuneError(f"--holdout {o.holdout} x {n} scenario(s): {2 * n * o.holdout} held-out episodes (source and tuned), "
+                        f"at most {MAX_BATCH}")  # fmt: skip
+    if o.workers is not None:
+        most = WORKERS_PER_CORE * (cores or os.cpu_count() or 1)
+        if not 1 <= o.workers <= most:
+            raise TuneError(f"--workers {o.workers}: expected a whole number in 1..{most} ({WORKERS_PER_CORE} per core)")
 
 
 # ---- the cluster ------------------------------------------------------------------------------
@@ -199,9 +230,15 @@ def _save_checkpoint(out: Path, state: dict[str, Any]) -> None:
     os.replace(tmp, out / CHECKPOINT)
 
 
-def _load_checkpoint(out: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
-    """The run's own checkpoint, None if there is none; TuneError if it belongs to another run.
-    (A pickle: only ever read from the run folder this command wrote.)"""
+START_OVER = "to start over, delete it or choose another --out"
+HISTORY_KEYS = ("generation", "best", "median", "source", "best_so_far", "success", "episodes", "wall_s", "sim_s", "workers")
+"""What every row of a checkpoint's history holds (the loop, the report and the plot read them)."""
+
+
+def _load_checkpoint(out: Path, settings: dict[str, Any], size: int) -> dict[str, Any] | None:
+    """The run's own checkpoint, None if there is none; TuneError if it is unreadable, of another
+    run or not the shape ``tune`` writes (``checkpoint_problem``). The file is never changed here.
+    (A pickle: loading one runs code it holds, so `--out` must be a folder the user trusts.)"""
     path = out / CHECKPOINT
     if not path.exists():
         return None
@@ -209,13 +246,60 @@ def _load_checkpoint(out: Path, settings: dict[str, Any]) -> dict[str, Any] | No
         with open(path, "rb") as handle:
             state = pickle.load(handle)
     except Exception as exc:  # a truncated or foreign file
-        raise TuneError(f"{path}: not a readable checkpoint ({type(exc).__name__}); remove it or choose another --out") from None
-    if not isinstance(state, dict) or state.get("version") != CHECKPOINT_VERSION:
-        raise TuneError(f"{path}: not a checkpoint of this version; remove it or choose another --out")
-    if state.get("settings") != settings:
-        differ = sorted(k for k in settings if state["settings"].get(k) != settings[k])
-        raise TuneError(f"{path}: a checkpoint of another run (different {', '.join(differ)}); choose another --out")
+        raise TuneError(f"{path}: not a readable checkpoint ({type(exc).__name__}); {START_OVER}") from None
+    problem = checkpoint_problem(state, settings, size)
+    if problem:
+        raise TuneError(f"{path}: {problem}")
     return state
+
+
+def checkpoint_problem(state: Any, settings: dict[str, Any], size: int) -> str | None:
+    """Why a loaded checkpoint cannot be resumed by the run with these ``settings`` and a genome of
+    ``size`` values (one line, naming what to do), or None if it can."""
+    import cma
+
+    if not isinstance(state, dict) or state.get("version") != CHECKPOINT_VERSION:
+        return f"not a checkpoint of this version; {START_OVER}"
+    theirs = state.get("settings")
+    if not isinstance(theirs, dict):
+        return f"not a usable checkpoint (no settings); {START_OVER}"
+    if theirs != settings:
+        differ = sorted(k for k in settings.keys() | theirs.keys() if theirs.get(k) != settings.get(k))
+        return f"a checkpoint of another run (different {', '.join(map(str, differ))}); choose another --out"
+    es = state.get("es")
+    if not isinstance(es, cma.CMAEvolutionStrategy):
+        return f"not a usable checkpoint (no CMA-ES state); {START_OVER}"
+    if es.N != size:
+        return f"a checkpoint of another run (a search of {es.N} values, the rule base now has {size}: was it edited?); choose another --out"
+    reason = _state_shape_problem(state, size)
+    return f"not a usable checkpoint ({reason}); {START_OVER}" if reason else None
+
+
+def _state_shape_problem(state: dict[str, Any], size: int) -> str | None:
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    history = state.get("history")
+    if not isinstance(history, list):
+        return "no history"
+    for i, row in enumerate(history):
+        if not isinstance(row, dict) or not all(number(row.get(k)) for k in HISTORY_KEYS) or row["generation"] != i + 1:
+            return f"history row {i + 1} is malformed"
+    if not all(number(state.get(k)) for k in ("episodes", "sim_s", "wall_s")):
+        return "no episode totals"
+    best = state.get("best")
+    if not history:
+        return None if best is None else "a best candidate without a history"
+    if not number(state.get("source_score")):
+        return "no score of the source rule base"
+    if not (isinstance(best, dict) and number(best.get("score")) and number(best.get("generation"))
+            and isinstance(best.get("x"), list) and len(best["x"]) == size and all(map(number, best["x"]))):  # fmt: skip
+        return "no usable best candidate"
+    try:
+        parse_rulebase(best.get("document"), "best candidate")
+    except Exception:  # any shape of data: RuleBaseError, or whatever a wrong type raises
+        return "its best candidate is not a valid rule base"
+    return None
 
 
 # ---- the run ----------------------------------------------------------------------------------
@@ -236,6 +320,7 @@ def prepare(o: TuneOptions) -> Prepared:
     check_options(o)
     try:
         document, where = load_document(o.rulebase)
+        Navigator(parse_rulebase(document, where), NavigatorParams(), 1.0)  # the daemon's own check, as sim and run make it
         genome = Genome(document, where, scale_outputs=o.scale_outputs)
     except ValueError as exc:  # GenomeError, RuleBaseError
         raise TuneError(str(exc)) from None
@@ -243,7 +328,7 @@ def prepare(o: TuneOptions) -> Prepared:
         o.out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise TuneError(f"--out {o.out}: {exc.strerror or exc}") from None
-    return Prepared(document, where, genome, _load_checkpoint(o.out, o.settings()))
+    return Prepared(document, where, genome, _load_checkpoint(o.out, o.settings(), genome.size))
 
 
 def tune(o: TuneOptions, on_progress: Callable[[Progress], None] | None = None, prepared: Prepared | None = None) -> dict[str, Any]:

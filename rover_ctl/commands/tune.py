@@ -13,12 +13,13 @@ from rover_ctl.cli import count, number_type
 
 CMA_SEED = number_type(int, 1, 2**32 - 1, "a whole number", "in 1..4294967295 (cma's seed range; 0 would seed from the clock)")
 
-SCHEDULER = re.compile(r"^(tcp|tls)://[^\s/:]+:\d{1,5}$")
+SCHEDULER = re.compile(r"^(tcp|tls)://[^\s/:]+:(\d{1,5})$")
 
 
 def _scheduler(text: str) -> str:
-    if not SCHEDULER.match(text):
-        raise argparse.ArgumentTypeError(f"expected tcp://HOST:PORT, got {text!r}")
+    match = SCHEDULER.match(text)
+    if not match or not 1 <= int(match.group(2)) <= 65535:
+        raise argparse.ArgumentTypeError(f"expected tcp://HOST:PORT (PORT in 1..65535), got {text!r}")
     return text
 
 
@@ -77,8 +78,12 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         prepared = prepare(options)
-        with Live(table(Progress(generations=args.generations)), console=console, refresh_per_second=2) as live:
-            result = tune(options, lambda p: live.update(table(p)), prepared)
+        try:
+            with Live(table(Progress(generations=args.generations)), console=console, refresh_per_second=2) as live:
+                result = tune(options, lambda p: live.update(table(p)), prepared)
+        finally:
+            if not console.is_terminal:  # Live ends its last frame with a newline only on a terminal
+                console.line()
     except TuneError as exc:
         raise UserError(str(exc)) from None
     for row in result["holdout"]:
