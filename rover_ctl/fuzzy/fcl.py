@@ -7,7 +7,8 @@ the end values, as FCL says), ``RANGE := (low .. high);``, ``METHOD : COG | MM |
 (``AREA_CENTRE`` is this project's extension for the paper's defuzzifier), ``DEFAULT := value;``,
 and one ``RULEBLOCK`` with ``AND : MIN | PROD;``, ``ACCU : MAX;``, ``ACT : MIN;`` and rules
 ``RULE n : IF a IS x AND b IS y THEN out IS z [, out2 IS w];``. Anything else (OR, NOT, WITH
-weights, singleton terms, other methods) is refused with the line it is on. FCL has no circular
+weights, singleton terms, other methods) is refused with the line it is on, and so is a number
+beyond the float range (``1e999``) in a TERM, RANGE or DEFAULT. FCL has no circular
 variables: angle inputs need the TOML format.
 """
 
@@ -43,6 +44,13 @@ def _points_to_trapezoid(points: list[tuple[float, float]], where: str) -> list[
     if shape not in shapes:
         raise RuleBaseError(f"{where}: term is not a trapezoid, triangle or shoulder: {points}")
     return shapes[shape]()
+
+
+def _finite(text: str, where: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise RuleBaseError(f"{where}: {text[:40]} is not a finite number")
+    return value
 
 
 def parse_fcl(text: str, where: str) -> dict[str, Any]:
@@ -95,19 +103,22 @@ def parse_fcl(text: str, where: str) -> dict[str, Any]:
 
 def _variable_line(line: str, spec: dict[str, Any], data: dict[str, Any], here: str) -> None:
     if match := re.fullmatch(r"TERM\s+(\w+)\s*:=\s*(.+)", line, flags=re.I):
-        points = [(float(x), float(mu)) for x, mu in POINT.findall(match.group(2))]
+        term = f"{here} TERM {match.group(1)}"
+        if POINT.sub(" ", match.group(2)).replace(",", " ").strip():  # e.g. (inf, 0): not skipped
+            raise RuleBaseError(f"{term}: expected (x, mu) points with x and mu numbers, got {match.group(2)[:60]!r}")
+        points = [(_finite(x, term), _finite(mu, term)) for x, mu in POINT.findall(match.group(2))]
         if len(points) < 2:
             raise RuleBaseError(f"{here}: TERM {match.group(1)} needs (x, mu) points")
-        spec["sets"][match.group(1)] = _points_to_trapezoid(points, f"{here} TERM {match.group(1)}")
+        spec["sets"][match.group(1)] = _points_to_trapezoid(points, term)
     elif match := re.fullmatch(rf"RANGE\s*:=\s*\(\s*({NUMBER})\s*\.\.\s*({NUMBER})\s*\)", line, flags=re.I):
-        spec["range"] = [float(match.group(1)), float(match.group(2))]
+        spec["range"] = [_finite(match.group(1), f"{here} RANGE"), _finite(match.group(2), f"{here} RANGE")]
     elif match := re.fullmatch(r"METHOD\s*:\s*(\w+)", line, flags=re.I):
         method = match.group(1).upper()
         if method not in METHODS:
             raise RuleBaseError(f"{here}: METHOD {method} not supported (supported: {', '.join(METHODS)})")
         data["defuzzifier"] = METHODS[method]
     elif match := re.fullmatch(rf"DEFAULT\s*:=\s*({NUMBER})", line, flags=re.I):
-        spec["default"] = float(match.group(1))
+        spec["default"] = _finite(match.group(1), f"{here} DEFAULT")
     else:
         raise RuleBaseError(f"{here}: unexpected {line!r} (TERM, RANGE, METHOD, DEFAULT supported)")
 

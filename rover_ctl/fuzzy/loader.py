@@ -2,8 +2,11 @@
 
 Every problem is one ``RuleBaseError`` line naming the file and the variable or rule:
 unknown keys, variables or set names, breakpoints that are not four (or three, a triangle)
-ascending numbers, infinite output sets, malformed rule text, conflicting rules. Input
-combinations no rule covers are not errors but are listed in ``RuleBase.warnings``.
+ascending numbers, infinite output sets, malformed rule text, conflicting rules. Every number is
+finite and within +-``MAX_MAGNITUDE``, except an input set's shoulder (``a = b = -inf`` or
+``c = d = inf``); an output's default lies in its range; a period is positive and a circular
+input's sets lie within ``-period .. 2 period``. Input combinations no rule covers are not errors
+but are listed in ``RuleBase.warnings``.
 """
 
 from __future__ import annotations
@@ -22,9 +25,21 @@ SHIPPED_DIR = Path(__file__).resolve().parent / "rulebases"
 MIN_RESOLUTION = 11
 MAX_RESOLUTION = 1_000_001
 """Samples of the sampled defuzzifiers: beyond this a rule base would only cost memory and time."""
+MAX_MAGNITUDE = 1e12
+"""Largest |number| in a rule base (breakpoints, ranges, defaults, periods): far beyond any unit a
+rover uses, and small enough that the defuzzifiers' products (area x peak) stay finite."""
 TOP_KEYS = {"name", "description", "and", "defuzzifier", "resolution", "inputs", "outputs", "rules"}
 VARIABLE_KEYS = {"unit", "range", "period", "default", "sets", "description"}
 CLAUSE = re.compile(r"^\s*(\w+)\s+is\s+(\w+)\s*$")
+
+
+class _Overflow(str):
+    """A TOML float literal beyond the float range (``1e400``), which tomllib would read as inf."""
+
+
+def _toml_float(text: str) -> float | _Overflow:
+    value = float(text)
+    return _Overflow(text) if math.isinf(value) and text.lstrip("+-") != "inf" else value
 
 
 def shipped() -> list[str]:
@@ -52,7 +67,7 @@ def load_rulebase(name_or_path: str | Path) -> RuleBase:
     if path.suffix.lower() == ".fcl":
         return parse_rulebase(parse_fcl(text, path.name), path.name)
     try:
-        data = tomllib.loads(text)
+        data = tomllib.loads(text, parse_float=_toml_float)
     except (ValueError, RecursionError) as exc:  # TOMLDecodeError, a 5000-digit number, nesting
         raise RuleBaseError(f"{path}: invalid TOML: {str(exc).splitlines()[0] or type(exc).__name__}") from None
     return parse_rulebase(data, path.name)
@@ -97,11 +112,21 @@ def _no_unknown(table: dict[str, Any], known: set[str], where: str) -> None:
         raise RuleBaseError(f"{where}: unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})")
 
 
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (isinstance(value, int) and abs(value) > 2**1023):
+def _number(value: Any, where: str, infinite: bool = False) -> float:
+    """A finite number within +-MAX_MAGNITUDE (or +-inf if ``infinite``), else a RuleBaseError."""
+    if isinstance(value, _Overflow):
+        raise RuleBaseError(f"{where}: {value[:40]} is beyond the float range")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise RuleBaseError(f"{where}: expected a number, got {str(value)[:40]!r}")
-    if math.isnan(value):
+    if isinstance(value, float) and math.isnan(value):
         raise RuleBaseError(f"{where}: expected a number, got {value!r}")
+    if isinstance(value, float) and math.isinf(value):
+        if not infinite:
+            raise RuleBaseError(f"{where}: expected a finite number, got {value!r}")
+        return value
+    if abs(value) > MAX_MAGNITUDE:  # an int is compared exactly: a 400-digit one does not overflow
+        shown = f"{value:g}" if isinstance(value, float) else str(value)[:40]
+        raise RuleBaseError(f"{where}: expected a number within +-{MAX_MAGNITUDE:g}, got {shown}")
     return float(value)
 
 
@@ -118,7 +143,7 @@ def _variables(table: Any, kind: str, where: str, output: bool) -> tuple[Variabl
         if not isinstance(span, list) or len(span) != 2:
             raise RuleBaseError(f"{here}: range must be [low, high]")
         low, high = (_number(v, f"{here} range") for v in span)
-        if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        if not low < high:
             raise RuleBaseError(f"{here}: range must be finite with low < high, got {span!r}")
         period = spec.get("period")
         if period is not None:
@@ -132,18 +157,21 @@ def _variables(table: Any, kind: str, where: str, output: bool) -> tuple[Variabl
         for set_name, points in sets_spec.items():
             if set_name in ("any", "none"):
                 raise RuleBaseError(f"{here}: '{set_name}' is reserved and cannot name a set")
-            sets.append(FuzzySet(set_name, _points(points, f"{here} set {set_name}", output)))
+            sets.append(FuzzySet(set_name, _points(points, f"{here} set {set_name}", output, period)))
         default = _number(spec.get("default", 0.0), f"{here} default")
+        if output and not low <= default <= high:
+            given = "" if "default" in spec else " (the value when none is given: set one)"
+            raise RuleBaseError(f"{here}: default {default:g}{given} is outside range [{low:g}, {high:g}]")
         variables.append(
             Variable(name, tuple(sets), low, high, str(spec.get("unit", "")), period, default)
         )
     return tuple(variables)
 
 
-def _points(points: Any, where: str, finite: bool) -> tuple[float, float, float, float]:
+def _points(points: Any, where: str, finite: bool, period: float | None = None) -> tuple[float, float, float, float]:
     if not isinstance(points, list) or len(points) not in (3, 4):
         raise RuleBaseError(f"{where}: expected [a, b, c, d] (trapezoid) or [a, peak, c] (triangle), got {points!r}")
-    values = [_number(v, where) for v in points]
+    values = [_number(v, where, infinite=True) for v in points]
     if len(values) == 3:
         values.insert(2, values[1])
     if any(p > q for p, q in zip(values, values[1:])):
@@ -152,7 +180,19 @@ def _points(points: Any, where: str, finite: bool) -> tuple[float, float, float,
         raise RuleBaseError(f"{where}: a set needs a support of non-zero width, got {points!r}")
     if finite and not all(math.isfinite(v) for v in values):
         raise RuleBaseError(f"{where}: output sets must be finite (the defuzzifier integrates them), got {points!r}")
-    return values[0], values[1], values[2], values[3]
+    a, b, c, d = values
+    left_shoulder, right_shoulder = a == b == -math.inf, c == d == math.inf
+    finite_left, finite_right = math.isfinite(a) and math.isfinite(b), math.isfinite(c) and math.isfinite(d)
+    if not (left_shoulder or finite_left) or not (right_shoulder or finite_right):
+        raise RuleBaseError(f"{where}: only a shoulder can be infinite (a = b = -inf or c = d = inf), got {points!r}")
+    if left_shoulder and right_shoulder:
+        raise RuleBaseError(f"{where}: a set cannot be a shoulder on both sides (it would cover every value), got {points!r}")
+    if period is not None and not -period <= a <= d <= 2.0 * period:
+        raise RuleBaseError(
+            f"{where}: a circular input's breakpoints must lie within -period..2 x period "
+            f"({-period:g}..{2.0 * period:g}: it is evaluated at x - period, x, x + period), got {points!r}"
+        )
+    return a, b, c, d
 
 
 def _clauses(text: str, variables: tuple[Variable, ...], kind: str, where: str) -> tuple[int | None, ...]:

@@ -26,7 +26,8 @@ gap keeps every support non-zero, clipping keeps everything inside the universe:
 
 Optionally (``scale_outputs``) one more number scales every output set and range about 0, within
 ``OUTPUT_SCALE_RANGE`` (off by default: the navigator scales the largest output peak to the top
-wheel speed, so a common scale matters only where it meets a fixed output default).
+wheel speed, so a common scale matters only where it meets a fixed output default; the scaled range
+is widened to keep that default inside it, as the loader requires).
 """
 
 from __future__ import annotations
@@ -162,7 +163,9 @@ class Genome:
                         new = [round(p * scale, DECIMALS) for p in new]
                     spec["sets"][set_name] = [float(p) for p in new]
                 if scaled:  # the universe with its sets (the sampled defuzzifiers sample the range)
-                    spec["range"] = [round(float(v) * scale, DECIMALS) for v in spec["range"]]
+                    low, high = (round(float(v) * scale, DECIMALS) for v in spec["range"])
+                    default = float(spec.get("default", 0.0))  # fixed, and the loader wants it in range
+                    spec["range"] = [min(low, default), max(high, default)]
         return doc
 
     def decode(self, x: np.ndarray) -> tuple[dict[str, Any], RuleBase]:

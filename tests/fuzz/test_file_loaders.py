@@ -11,12 +11,15 @@ lines dropped or doubled, invalid UTF-8.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import signal
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fuzz.conftest import FUZZ
 from hypothesis import given
@@ -147,9 +150,18 @@ def test_rule_base_loaders(tmp_path_factory, data, fcl):
     path.write_bytes(data.draw(mutated(seed)))
     with no_hang(path.name):
         try:
-            load_rulebase(path)
+            rulebase = load_rulebase(path)
         except RuleBaseError as exc:
             assert "\n" not in str(exc).strip()
+            return
+    # What loads is usable: finite outputs, no numpy warnings, across and beyond the universes.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for fraction in (-0.5, 0.0, 0.37, 1.0, 2.0):
+            row = {v.name: v.low + fraction * (v.high - v.low) for v in rulebase.inputs}
+            batch = rulebase.evaluate({name: np.array([x]) for name, x in row.items()})
+            for name, value in rulebase.evaluate_one(**row).items():
+                assert math.isfinite(value) and math.isfinite(batch[name][0]), (row, name, value, batch[name][0])
 
 
 @FUZZ

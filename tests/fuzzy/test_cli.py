@@ -83,3 +83,25 @@ def test_show_plot_says_which_file_it_wrote(tmp_path, capsys):
     assert code == 0 and f"drawn to {tmp_path / 'sets.png'}" in out and (tmp_path / "sets.png").is_file()
     code, _, err = run(["fuzzy", "show", "default", "--plot", str(tmp_path)], capsys)
     assert code == 2 and f"--plot {tmp_path}: is a folder" in err
+
+
+BAD_DEFAULT = """
+[inputs.x]
+range = [0, 10]
+sets = { lo = [0, 0, 0, 10], hi = [0, 10, inf, inf] }
+[outputs.y]
+range = [0, 10]
+default = inf
+sets = { a = [0, 2, 4], b = [6, 8, 10] }
+[rules]
+list = ["if x is lo then y is a", "if x is hi then y is b"]
+"""
+
+
+@pytest.mark.parametrize("command", [["fuzzy", "show"], ["fuzzy", "eval", "--rulebase"]])
+def test_a_non_finite_default_is_refused_in_one_line(tmp_path, capsys, monkeypatch, command):
+    path = tmp_path / "bad.toml"
+    path.write_text(BAD_DEFAULT)
+    code, out, err = run([*command, str(path)], capsys, "x\n1\n", monkeypatch)
+    assert (code, out) == (2, "")
+    assert err == "rover-ctl: error: bad.toml [outputs.y] default: expected a finite number, got inf\n"

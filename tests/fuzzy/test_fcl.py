@@ -79,11 +79,21 @@ def test_fcl_and_toml_agree(tmp_path):
         (("ACCU : MAX", "ACCU : SUM"), "tiny.fcl line 27: ACCU : SUM not supported"),
         (("FUZZIFY z\n", "FUZZIFY w\n"), "tiny.fcl line 14: w is not declared in VAR_INPUT"),
         (("THEN y IS a", "THEN y IS c"), "tiny.fcl rule 1: unknown set 'c' of y"),
+        (("DEFAULT := 3.5", "DEFAULT := 1e999"), "tiny.fcl line 22 DEFAULT: 1e999 is not a finite number"),
+        (("DEFAULT := 3.5", "DEFAULT := 10.5"), "tiny.fcl [outputs.y]: default 10.5 is outside range [0, 10]"),
+        (("DEFAULT := 3.5", "DEFAULT := -1e308"), "tiny.fcl [outputs.y] default: expected a number within +-1e+12, got -1e+308"),
+        (("TERM lo := (0, 1) (10, 0)", "TERM lo := (1e999, 1) (1e999, 0)"), "tiny.fcl line 11 TERM lo: 1e999 is not a finite number"),
+        (("TERM lo := (0, 1) (10, 0)", "TERM lo := (0, 1) (10, 1e999)"), "tiny.fcl line 11 TERM lo: 1e999 is not a finite number"),
+        (("TERM lo := (0, 1) (10, 0)", "TERM lo := (0, 1) (10, 0) (inf, 0)"), "tiny.fcl line 11 TERM lo: expected (x, mu) points with x and mu numbers, got '(0, 1) (10, 0) (inf, 0)'"),
+        (("TERM a := (0, 0) (2, 1) (4, 0)", "TERM a := (0, 0) (2, 1) (4e20, 0)"), "tiny.fcl [outputs.y] set a: expected a number within +-1e+12, got 4e+20"),
+        (("RANGE := (0 .. 10)", "RANGE := (0 .. 1e999)"), "tiny.fcl line 23 RANGE: 1e999 is not a finite number"),
     ],
 )
 def test_unsupported_or_wrong_fcl_is_one_line_error(tmp_path, edit, message):
     path = tmp_path / "tiny.fcl"
-    path.write_text(FCL.replace(*edit))
+    assert edit[0] in FCL
+    path.write_text(FCL.replace(*edit, 1))
     with pytest.raises(RuleBaseError) as info:
         load_rulebase(path)
     assert message in str(info.value)
+    assert "\n" not in str(info.value)

@@ -2,6 +2,7 @@
 
 import math
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -71,6 +72,71 @@ def test_errors_name_file_and_rule(tmp_path, rules, header_edit, message):
         load_rulebase(path)
     assert message in str(info.value)
     assert "\n" not in str(info.value)
+
+
+OUTPUT_Y = "[outputs.y]\nrange = [0, 10]\ndefault = 3.5"
+
+
+@pytest.mark.parametrize(
+    "header_edit, message",
+    [
+        (("default = 3.5", "default = inf"), "tiny.toml [outputs.y] default: expected a finite number, got inf"),
+        (("default = 3.5", "default = -inf"), "tiny.toml [outputs.y] default: expected a finite number, got -inf"),
+        (("default = 3.5", "default = nan"), "tiny.toml [outputs.y] default: expected a number, got nan"),
+        (("default = 3.5", "default = 1e400"), "tiny.toml [outputs.y] default: 1e400 is beyond the float range"),
+        (("default = 3.5", "default = 1e30"), "tiny.toml [outputs.y] default: expected a number within +-1e+12, got 1e+30"),
+        (("default = 3.5", "default = -1e308"), "tiny.toml [outputs.y] default: expected a number within +-1e+12, got -1e+308"),
+        (("default = 3.5", "default = 1" + "0" * 300), "tiny.toml [outputs.y] default: expected a number within +-1e+12, got 1000"),
+        (("default = 3.5", "default = 10.5"), "tiny.toml [outputs.y]: default 10.5 is outside range [0, 10]"),
+        ((OUTPUT_Y, "[outputs.y]\nrange = [1, 10]"), "tiny.toml [outputs.y]: default 0 (the value when none is given: set one) is outside range [1, 10]"),
+        (("lo = [0, 0, 0, 10]", "lo = [0, 0, 0, 1e400]"), "tiny.toml [inputs.x] set lo: 1e400 is beyond the float range"),
+        (("lo = [0, 0, 0, 10]", "lo = [0, 0, 0, -1E+999]"), "tiny.toml [inputs.x] set lo: -1E+999 is beyond the float range"),
+        (("lo = [0, 0, 0, 10]", "lo = [0, 0, 0, inf]"), "tiny.toml [inputs.x] set lo: only a shoulder can be infinite (a = b = -inf or c = d = inf)"),
+        (("lo = [0, 0, 0, 10]", "lo = [-inf, 0, 0, 10]"), "tiny.toml [inputs.x] set lo: only a shoulder can be infinite"),
+        (("lo = [0, 0, 0, 10]", "lo = [0, inf, inf, inf]"), "tiny.toml [inputs.x] set lo: only a shoulder can be infinite"),
+        (("lo = [0, 0, 0, 10]", "lo = [-inf, -inf, -inf]"), "tiny.toml [inputs.x] set lo: a set needs a support of non-zero width"),
+        (("lo = [0, 0, 0, 10]", "lo = [-inf, -inf, inf, inf]"), "tiny.toml [inputs.x] set lo: a set cannot be a shoulder on both sides"),
+        (("lo = [0, 0, 0, 10]", "lo = [0, 0, 0, 2e12]"), "tiny.toml [inputs.x] set lo: expected a number within +-1e+12, got 2e+12"),
+        (("a = [0, 2, 4]", "a = [-1e200, 0, 1e200]"), "tiny.toml [outputs.y] set a: expected a number within +-1e+12, got -1e+200"),
+        (("range = [0, 10]", "range = [0, 1e400]"), "tiny.toml [inputs.x] range: 1e400 is beyond the float range"),
+        (("range = [0, 10]", "range = [-inf, 10]"), "tiny.toml [inputs.x] range: expected a finite number, got -inf"),
+        ((OUTPUT_Y, "[outputs.y]\nrange = [-1e308, 1e308]\ndefault = 3.5"), "tiny.toml [outputs.y] range: expected a number within +-1e+12, got -1e+308"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = inf\n"), "tiny.toml [inputs.x] period: expected a finite number, got inf"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = nan\n"), "tiny.toml [inputs.x] period: expected a number, got nan"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = 1e400\n"), "tiny.toml [inputs.x] period: 1e400 is beyond the float range"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = 1e13\n"), "tiny.toml [inputs.x] period: expected a number within +-1e+12"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = 0\n"), "tiny.toml [inputs.x]: period must be positive"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = 4\n"), "tiny.toml [inputs.x] set lo: a circular input's breakpoints must lie within -period..2 x period (-4..8"),
+        (("[inputs.x]\n", "[inputs.x]\nperiod = 1e-300\n"), "tiny.toml [inputs.x] set lo: a circular input's breakpoints must lie within"),
+        (("[inputs.x]\nrange = [0, 10]\nsets = {{ lo = [0, 0, 0, 10], hi = [0, 10, inf, inf] }}",
+          "[inputs.x]\nrange = [0, 10]\nperiod = 10\nsets = {{ lo = [-10, 0, 0, 10], hi = [0, 10, 20] }}"), None),  # loads
+        (("name = \"tiny\"", "name = \"tiny\"\nresolution = 1e400"), "tiny.toml: resolution must be a whole number 11-1000001, got 1e400"),
+    ],
+)  # fmt: skip
+def test_non_finite_or_absurd_numbers_are_refused(tmp_path, header_edit, message):
+    assert header_edit[0] in HEADER
+    path = write(tmp_path, FULL, header=HEADER.replace(*header_edit, 1))
+    if message is None:
+        load_rulebase(path)
+        return
+    with pytest.raises(RuleBaseError) as info:
+        load_rulebase(path)
+    assert message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("defuzzifier", ["area_centre", "centroid", "mean_of_maxima"])
+def test_the_largest_numbers_allowed_evaluate_finitely(tmp_path, defuzzifier):
+    header = HEADER.replace("lo = [0, 0, 0, 10], hi = [0, 10, inf, inf]", "lo = [-1e12, -1e12, -1e12, 1e12], hi = [-1e12, 1e12, inf, inf]", 1)
+    header = header.replace(OUTPUT_Y, "[outputs.y]\nrange = [-1e12, 1e12]\ndefault = -1e12", 1)
+    header = header.replace("a = [0, 2, 4], b = [6, 8, 10]", "a = [-1e12, -1e12, 0], b = [-1e12, 1e12, 1e12]", 1)
+    rb = load_rulebase(write(tmp_path, FULL, defuzzifier=defuzzifier, header=header))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for x in (-1e12, -1.0, 0.0, 5e11, 1e12, 1e300, math.inf, -math.inf, math.nan):
+            one = rb.evaluate_one(x=x, z=5.0)["y"]
+            batch = float(rb.evaluate({"x": np.array([x]), "z": np.array([5.0])})["y"][0])
+            assert math.isfinite(one) and math.isfinite(batch) and -1e12 <= one <= 1e12, (x, one, batch)
 
 
 def test_unreadable_files(tmp_path):

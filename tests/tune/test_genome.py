@@ -105,3 +105,13 @@ def test_a_rule_base_that_is_not_toml_is_refused(tmp_path):
     fcl.write_text("FUNCTION_BLOCK x\nEND_FUNCTION_BLOCK\n")
     with pytest.raises(GenomeError, match="only TOML"):
         load_document(fcl)
+
+
+def test_output_scale_keeps_a_fixed_default_inside_the_range():
+    """The loader wants an output's default inside its range; scaling the range about 0 must not leave it out."""
+    document = {**SOURCES["default"][0], "outputs": {k: {**v, "default": 120} for k, v in SOURCES["default"][0]["outputs"].items()}}
+    genome = Genome(document, "default.toml", scale_outputs=True)
+    x = np.zeros(genome.size)
+    x[-1] = -0.5  # scale 0.5: the range [-50, 125] becomes [-25, 62.5]
+    doc, rulebase = genome.decode(x)
+    assert doc["outputs"]["left_motor"]["range"] == [-25.0, 120.0] and rulebase.outputs[0].default == 120
