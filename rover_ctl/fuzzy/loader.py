@@ -17,6 +17,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from rover_ctl import inputfile
 from rover_ctl.fuzzy.fcl import parse_fcl
 from rover_ctl.fuzzy.membership import FuzzySet, Variable
 from rover_ctl.fuzzy.rulebase import Rule, RuleBase, RuleBaseError
@@ -61,7 +62,7 @@ def load_rulebase(name_or_path: str | Path) -> RuleBase:
     """Load and check a rule base by shipped name or path (TOML, or FCL for a ``.fcl`` file)."""
     path = resolve(name_or_path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = inputfile.read_text(path)
     except (OSError, UnicodeDecodeError) as exc:
         raise RuleBaseError(f"{path}: cannot read: {exc}") from None
     if path.suffix.lower() == ".fcl":

@@ -83,6 +83,8 @@ class Navigator:
                 self._obstacles.append((variable.name, SIDES[variable.name.removeprefix("obstacle_")], variable.unit == "m"))
         self._orientations = tuple(orientation for _, orientation, _ in self._obstacles)
         self._full_scale = max(abs(s.peak) for name in OUTPUTS for s in self.rulebase.outputs[self.rulebase.output_names.index(name)].sets)
+        if self._full_scale <= 0.0:  # every output set peaks at 0: the largest peak scales to max_wheel_rpm
+            raise RuleBaseError(f"{self.rulebase.source}: every motor set peaks at 0: the rover could never move")
         self.rangefinders: RangefinderPlan | None = None
         """How the rover's rangefinders feed the obstacle inputs (None: as passed)."""
 

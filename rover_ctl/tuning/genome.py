@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from rover_ctl import inputfile
 from rover_ctl.fuzzy import RuleBase, parse_rulebase
 from rover_ctl.fuzzy.loader import resolve
 
@@ -79,7 +80,7 @@ def load_document(name_or_path: str | Path) -> tuple[dict[str, Any], str]:
     if path.suffix.lower() != ".toml":
         raise GenomeError(f"{path}: only TOML rule bases can be tuned (write an FCL file as TOML first)")
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8")), path.name
+        return tomllib.loads(inputfile.read_text(path)), path.name
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise GenomeError(f"{path}: cannot read: {exc}") from None
 

@@ -85,6 +85,17 @@ def test_rule_base_without_navigation_inputs_is_refused(tmp_path):
         Navigator(load_rulebase(path), NavigatorParams(), 200.0)
 
 
+def test_rule_base_whose_motor_sets_all_peak_at_zero_is_refused(tmp_path):
+    """The navigator scales the largest output peak to max_wheel_rpm: 0 divided by zero."""
+    path = tmp_path / "still.toml"
+    inputs = "".join(f'[inputs.{n}]\nrange = [0, 1]\nsets = {{ lo = [0, 0, 0, 1] }}\n' for n in ("target_distance", "target_direction"))
+    outputs = "".join(f'[outputs.{n}]\nrange = [-1, 1]\nsets = {{ stop = [-1, 0, 1] }}\n' for n in ("left_motor", "right_motor"))
+    rules = '[rules]\nlist = ["if target_distance is lo and target_direction is lo then left_motor is stop and right_motor is stop"]\n'
+    path.write_text(inputs + outputs + rules)
+    with pytest.raises(RuleBaseError, match="still.toml: every motor set peaks at 0"):
+        Navigator(load_rulebase(path), NavigatorParams(), 200.0)
+
+
 # ----- closed loop, default rule base ---------------------------------------------------------
 
 
