@@ -27,6 +27,7 @@ link cannot advance vehicle time, so its silence is measured on the wall clock.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import math
@@ -132,6 +133,8 @@ class Daemon:
         self._odometry_rates: dict[str, float] = {}
         self._streams_checked_s = math.inf
         self._next_override_wall_s = 0.0
+        self._arm_results = {arm: functools.partial(self._on_arm_result, arm=arm) for arm in (True, False)}
+        """One callback per arming direction, so that a repeated request joins the waiting one (VehicleLink.command_async)."""
 
     @property
     def period_s(self) -> float:
@@ -448,8 +451,7 @@ class Daemon:
                 self.gcs.send_mission_item_reached(event.seq)
             elif isinstance(event, ArmRequest):
                 params = (1.0 if event.arm else 0.0, float(ARM_FORCE_MAGIC) if event.force else 0.0)
-                self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params,
-                                        on_result=lambda result, arm=event.arm: self._on_arm_result(result, arm))
+                self.link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, *params, on_result=self._arm_results[event.arm])
             elif kind in ("mode", "complete"):
                 log.info("%s %s at t=%.2f s", kind, fields, now)
 

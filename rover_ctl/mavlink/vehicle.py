@@ -74,6 +74,8 @@ WRONG_BAUD_BYTES = 4096
 PYMAVLINK_DEFAULT_BAUD = 115200
 NO_ANSWER = -1
 """``CommandResult.result`` of a command no COMMAND_ACK answered after all retries."""
+MAX_COMMAND_WAITERS = 8
+"""Callers one outstanding command answers (a repeat of it joins them instead of being sent)."""
 
 
 class LinkError(RuntimeError):
@@ -199,7 +201,11 @@ class _Pending:
     params: tuple[float, ...]
     sent_wall_s: float
     attempts: int
-    on_result: Callable[[CommandResult], None] | None
+    waiters: list[Callable[[CommandResult], None]]
+
+    def answer(self, result: CommandResult) -> None:
+        for waiter in self.waiters:
+            waiter(result)
 
 
 class VehicleLink:
@@ -514,8 +520,7 @@ class VehicleLink:
                 continue
             if pending.attempts > self.command_retries:
                 del self._pending[pending.command]
-                if pending.on_result:
-                    pending.on_result(CommandResult(pending.command, NO_ANSWER))
+                pending.answer(CommandResult(pending.command, NO_ANSWER))
                 continue
             self._send_command(pending, now)
 
@@ -565,8 +570,18 @@ class VehicleLink:
 
     def command_async(self, command: int, *params: float, on_result: Callable[[CommandResult], None] | None = None) -> None:
         """Send COMMAND_LONG; retried by ``tick`` until acknowledged; ``on_result`` gets the outcome.
-        A newer request for the same command replaces an unanswered older one."""
-        pending = _Pending(command, tuple(params) + (0.0,) * (7 - len(params)), 0.0, 0, on_result)
+        A newer request for the same command with other parameters replaces an unanswered older
+        one. The same request again while it waits for its answer is not sent again: it waits for
+        that answer (a ground station repeating a disarm a thousand times put a thousand
+        COMMAND_LONGs on the vehicle's radio); its ``on_result`` joins the waiters unless already
+        among them, up to ``MAX_COMMAND_WAITERS``."""
+        full = tuple(float(p) for p in params) + (0.0,) * (7 - len(params))
+        pending = self._pending.get(command)
+        if pending is not None and pending.params == full:
+            if on_result is not None and on_result not in pending.waiters and len(pending.waiters) < MAX_COMMAND_WAITERS:
+                pending.waiters.append(on_result)
+            return
+        pending = _Pending(command, full, 0.0, 0, [on_result] if on_result is not None else [])
         self._pending[command] = pending
         self._send_command(pending, self._wall())
 
@@ -583,8 +598,7 @@ class VehicleLink:
             return None
         del self._pending[msg.command]
         result = CommandResult(msg.command, msg.result)
-        if pending.on_result:
-            pending.on_result(result)
+        pending.answer(result)
         return result
 
     def arm_async(self, arm: bool, on_result: Callable[[CommandResult], None] | None = None) -> None:

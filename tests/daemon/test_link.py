@@ -13,7 +13,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
-from rover_ctl.mavlink.vehicle import (CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus,  # noqa: E402
+from rover_ctl.mavlink.vehicle import (MAX_COMMAND_WAITERS, CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus,  # noqa: E402
                                       VehicleVersion, decode_range)  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from support import free_port  # noqa: E402
@@ -135,6 +135,27 @@ def test_command_is_retried_until_acknowledged(pair):
     vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED)
     assert drain(link, CommandResult).accepted
     assert results and results[0].accepted
+
+
+def test_a_repeated_command_waits_for_the_outstanding_one_instead_of_being_sent_again(pair):
+    """A ground station repeating a disarm a thousand times put a thousand COMMAND_LONGs on the
+    vehicle's link (a 57600 radio fills at some 140 a second)."""
+    link, vehicle, _ = pair
+    first: list[CommandResult] = []
+    others = [[] for _ in range(12)]
+    link.arm_async(False, on_result=first.append)
+    for _ in range(1000):
+        link.arm_async(False, on_result=first.append)  # the same waiter: joins once
+    for results in others:
+        link.arm_async(False, on_result=results.append)
+    assert receive(vehicle, "COMMAND_LONG").param1 == 0.0
+    assert vehicle.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.3) is None
+    vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED)
+    assert drain(link, CommandResult).accepted
+    assert len(first) == 1  # each waiter answered once; beyond MAX_COMMAND_WAITERS (8) not kept
+    assert sum(len(r) for r in others) == MAX_COMMAND_WAITERS - 1
+    link.arm_async(True, on_result=first.append)  # other parameters: a new request, sent
+    assert receive(vehicle, "COMMAND_LONG").param1 == 1.0
 
 
 def test_unanswered_command_fails_after_the_retries(pair):
