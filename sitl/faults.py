@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from sitl.geodesy import WORLD_EXTENT_M
+
 FAULT_PARAMS: dict[str, tuple[float, str]] = {
     "SIM_GPS_DISABLE": (0.0, "1: the GPS reports no fix (outage)"),
     "SIM_GPS_GLITCH_X": (0.0, "GPS position offset north, m (a glitch is a jump of this size)"),
@@ -37,7 +39,12 @@ FAULT_PARAMS: dict[str, tuple[float, str]] = {
 }
 
 _MASKS = ("SIM_RF_FAIL", "SIM_RF_STUCK")
-_RANGES = {"SIM_WHEEL_SLIP": (0.0, 1.0), "SIM_LINK_LOSS": (0.0, 100.0)}
+_RANGES = {"SIM_WHEEL_SLIP": (0.0, 1.0), "SIM_LINK_LOSS": (0.0, 100.0),
+           "SIM_GPS_GLITCH_X": (-WORLD_EXTENT_M, WORLD_EXTENT_M), "SIM_GPS_GLITCH_Y": (-WORLD_EXTENT_M, WORLD_EXTENT_M)}
+"""The numeric parameters' ranges (the others are any finite number, or a bitmask). A glitch moves
+the fix at most a world's extent (sitl.geodesy.WORLD_EXTENT_M): a receiver's own jumps are tens of
+metres, and 1e300 m wrapped the fix around the Earth to a meaningless place. PARAM_SET, --param
+and a world's gps_glitch fault all pass through check_param."""
 
 # Scheduled fault name -> (its required members, function of the members -> SIM_* values).
 _SCHEDULED = {

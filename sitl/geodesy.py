@@ -7,7 +7,20 @@ local tangent plane (ENU) to well under a millimetre.
 
 from __future__ import annotations
 
-from pyproj import Transformer
+from pyproj import Geod, Transformer
+
+WORLD_EXTENT_M = 10_000.0
+"""How far a world reaches: a rover's mission spans metres to a few kilometres, so an obstacle
+larger than this (a circle's radius, a polygon's or a motion path's reach from its first point) or
+a GPS glitch farther than this is a mistake in the file, not a scenario (a radius of 1e300 m
+overflowed shapely and ran with a garbage obstacle)."""
+_GEOD = Geod(ellps="WGS84")
+
+
+def distances_m(lon0_deg: float, lat0_deg: float, lonlats) -> list[float]:
+    """Geodesic distances on WGS84 from (lon0, lat0) to each [lon, lat] of ``lonlats``."""
+    lons, lats = [p[0] for p in lonlats], [p[1] for p in lonlats]
+    return list(_GEOD.inv([lon0_deg] * len(lons), [lat0_deg] * len(lats), lons, lats)[2])
 
 
 class LocalFrame:

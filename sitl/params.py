@@ -221,11 +221,12 @@ and ``paper`` (front, back, left, right)."""
 @dataclass(frozen=True)
 class Limits:
     """The values a numeric parameter may take: finite, above ``low`` (from it with ``low_included``)
-    and up to ``high``."""
+    and up to ``high``, in ``unit``."""
 
     low: float = 0.0
     high: float = math.inf
     low_included: bool = False
+    unit: str = ""
 
     def admits(self, value: float) -> bool:
         above = self.low <= value if self.low_included else self.low < value
@@ -233,20 +234,49 @@ class Limits:
 
     def __str__(self) -> str:
         low = f"{'>=' if self.low_included else '>'} {self.low:g}"
-        return low if math.isinf(self.high) else f"{low} and <= {self.high:g}"
+        text = low if math.isinf(self.high) else f"{low} and <= {self.high:g}"
+        return f"{text} {self.unit}" if self.unit else text
+
+
+def between(low: float, high: float, unit: str = "") -> Limits:
+    """``low`` to ``high`` inclusive, in ``unit``."""
+    return Limits(low, high, low_included=True, unit=unit)
 
 
 POSITIVE = Limits()
-"""The rule: a parameter is a magnitude (a rate, length, mass, time constant) that cannot be zero."""
+"""The rule for a sensor parameter LIMITS does not name: a magnitude (a rate, time constant, count)
+that cannot be zero."""
 NON_NEGATIVE = Limits(low_included=True)
 NOISE = Limits(0.0, 100.0, low_included=True)
 """A noise or bias spread in its field's unit (m, m/s, deg, deg/s): more is a broken sensor, and
 pushes the telemetry out of its MAVLink fields."""
 LIMITS: dict[str, Limits] = {
-    "motor.battery_v": Limits(0.0, 65.534),  # SYS_STATUS: millivolts in a uint16, 65535 = unknown
-    "motor.rotor_inertia_kgm2": NON_NEGATIVE,
-    "motor.viscous_nms_per_rad": NON_NEGATIVE,
-    "robot.wheel_inertia_kgm2": NON_NEGATIVE,
+    # The drive and the body: every field has a realistic range, from a 0.1 kg toy on N20 micro
+    # gearmotors (6 V, 20-60 ohm, 1000:1) to a 1 t research platform on 1 kW wheelchair or hub
+    # motors (24-48 V, 0.05-0.2 ohm, direct drive). Within them the exact discretisation of
+    # sitl.physics stays finite and decaying (its docstring; a test sweeps every corner), and
+    # inconsistency() refuses combinations that drive faster or turn more per substep than the
+    # emulator models.
+    "motor.battery_v": between(3.0, 65.534, "V"),  # one lithium cell; SYS_STATUS carries millivolts in a uint16
+    "motor.pwm_neutral_us": between(500.0, 2500.0, "us"),  # the span of any RC servo pulse
+    "motor.pwm_range_us": between(50.0, 1000.0, "us"),
+    "motor.resistance_ohm": between(0.01, 100.0, "ohm"),
+    "motor.inductance_h": between(1e-5, 0.1, "H"),  # 1e-300 overflowed the discretisation to NaN
+    "motor.ke_v_per_radps": between(0.001, 10.0, "V/(rad/s)"),  # a 30 000 rpm micro motor to a slow hub motor
+    "motor.kt_nm_per_a": between(0.001, 10.0, "N m/A"),
+    "motor.gear_ratio": between(1.0, 1000.0),  # direct drive to a micro gearmotor's 1000:1
+    "motor.rotor_inertia_kgm2": between(0.0, 0.01, "kg m^2"),  # a 1 kW motor's rotor is a few 1e-3
+    "motor.viscous_nms_per_rad": between(0.0, 0.01, "N m s/rad"),  # 0.01: a 1 kW motor's whole torque at 300 rad/s
+    "robot.mass_kg": between(0.1, 1000.0, "kg"),
+    "robot.track_m": between(0.05, 5.0, "m"),  # as the daemon's RBT_TRACK (rover_ctl/parameters.py)
+    "robot.wheel_radius_m": between(0.01, 1.0, "m"),  # as the daemon's WENC_RADIUS
+    "robot.wheel_inertia_kgm2": between(0.0, 20.0, "kg m^2"),  # a 20 kg wheel of radius 1 m
+    "robot.footprint_length_m": between(0.05, 10.0, "m"),  # as the daemon's RBT_LENGTH and RBT_WIDTH
+    "robot.footprint_width_m": between(0.05, 10.0, "m"),
+    "physics_dt_s": between(1e-6, 0.01, "s"),  # 1e-300 hung in one frame, deaf to SIGTERM; above 10 ms the pose steps coarsely
+    "collision_check_s": between(1e-6, 0.1, "s"),
+    "contact_release_m": between(0.0, 10.0, "m"),
+    # Sensors: wire bounds and broken-sensor bounds; the rest is POSITIVE.
     "gps.white_std_m": NOISE,
     "gps.bias_std_m": NOISE,
     "gps.dropout_prob": Limits(0.0, 1.0, low_included=True),
@@ -265,18 +295,44 @@ LIMITS: dict[str, Limits] = {
     "imu.gyro_noise_std_dps": NOISE,
     "imu.gyro_bias_std_dps": NOISE,
     "encoder.slip_noise_m2_per_m": NON_NEGATIVE,
-    "contact_release_m": NON_NEGATIVE,
-    "physics_dt_s": Limits(1e-6, low_included=True),  # 1e-300 hung in one frame, deaf to SIGTERM
 }
-"""The exceptions to POSITIVE, by ``SECTION.FIELD`` as ``--set`` names them."""
+"""What ``--set`` admits, by ``SECTION.FIELD`` as it names them; a field not here is POSITIVE. Every
+field of the drive and the body (``motor``, ``robot``, the physics step) is here with its range."""
+MAX_TOP_SPEED_MPS = 30.0
+"""The drive's no-load top speed at full battery at most (r times the steady wheel speed): six
+times a Warthog-sized platform's 5 m/s, room for a fast hobby build, and far below GPS_RAW_INT's
+655 m/s (a uint16 of cm/s), which 65 V on a motor of ke 0.001 V/(rad/s) driving 1 m wheels
+overflowed mid-run though each value was in range."""
+MAX_SUBSTEP_TURN_RAD = 0.1
+"""The most the heading may turn in one physics substep at the top turn rate (wheels at full
+opposite speeds, 2 v_top / track). The pose is integrated explicitly with the mid-step heading:
+it cannot diverge, but it cuts arcs into chords, and at 0.1 rad (6 deg) a chord is within 0.05%
+of the arc."""
 
 
 def inconsistency(params: SitlParams) -> str | None:
-    """Why fields that each passed their LIMITS cannot go together, or None."""
+    """Why fields that each passed their LIMITS cannot go together, or None.
+
+    The drive's linear system is discretised exactly (sitl.physics): it is stable at any substep,
+    and :func:`sitl.physics.drive_inconsistency` confirms that its discretisation is finite and
+    decays. What remains explicit is the pose, integrated with the mid-step heading: it has no
+    feedback to go unstable, but it is only as good as the turn per substep, bounded here
+    (MAX_SUBSTEP_TURN_RAD), and the top speed bounds how far it goes (MAX_TOP_SPEED_MPS)."""
+    from sitl.physics import drive_inconsistency  # sitl.physics imports this module
+
     r = params.rangefinder
     if not r.min_m < r.max_m:
         return f"rangefinder.min_m {r.min_m:g} must be below rangefinder.max_m {r.max_m:g}"
-    return None
+    motor, robot = params.motor, params.robot
+    top_mps = robot.wheel_radius_m * motor.steady_wheel_radps(motor.battery_v)
+    if top_mps > MAX_TOP_SPEED_MPS:
+        return (f"the motor.* and robot.* fields give a top speed of {top_mps:.3g} m/s (robot.wheel_radius_m times the steady "
+                f"wheel speed at motor.battery_v), over {MAX_TOP_SPEED_MPS:g} m/s")
+    turn_rad = 2.0 * top_mps / robot.track_m * params.physics_dt_s
+    if turn_rad > MAX_SUBSTEP_TURN_RAD:
+        return (f"physics_dt_s {params.physics_dt_s:g} s turns the rover {turn_rad:.3g} rad per substep at its top turn rate "
+                f"(2 * {top_mps:.3g} m/s / robot.track_m {robot.track_m:g} m), over {MAX_SUBSTEP_TURN_RAD:g} rad: lower physics_dt_s")
+    return drive_inconsistency(motor, robot, params.physics_dt_s)
 
 
 def apply_override(params: SitlParams, assignment: str) -> None:

@@ -14,7 +14,20 @@ yaw rate r (wr - wl) / track, the kinetic energy of body and drive gives the whe
 so the robot's mass loads both motors together and its yaw inertia loads them in opposition.
 The linear system x' = A x + B u, x = (i_l, i_r, w_l, w_r), is discretised exactly for a
 zero-order-hold voltage over the fixed substep (matrix exponential), so the stiff electrical pole
-(L/R = 0.5 ms) is integrated stably at any substep. The pose is integrated on the ground plane
+(L/R = 0.5 ms) is integrated stably at any substep.
+
+Why no combination of parameters in range (``sitl.params.LIMITS``) can give NaN: A is stable for
+every R, L, Ke, Kt, N > 0, b >= 0 and M positive definite (M is: its eigenvalues are J_wheel +
+N^2 J_rotor plus m r^2 / 2 > 0, or plus 2 I_z r^2 / track^2 > 0). M's eigenvectors (1, 1) and
+(1, -1) split the drive into a straight and a turning mode, each ``L i' = -R i - Ke N w + V``,
+``m w' = N Kt i - N^2 b w`` with m > 0 that mode's inertia, whose characteristic polynomial
+s^2 + (R/L + N^2 b/m) s + N^2 (R b + Ke Kt) / (L m) has positive coefficients: both poles are in
+the left half-plane, so exp(A dt) has spectral radius below 1 for every dt > 0. Unlike an explicit
+integrator, the step needs no bound for stability. What can fail is floating point: at
+L = 1e-300 H, R/L dt overflowed and the exponential came out NaN. The ranges keep every entry of
+A dt below 1e12, where scipy's scaling and squaring stays finite; ``drive_inconsistency`` checks
+the result at start (finite, spectral radius at most 1 + DECAY_TOLERANCE) and a test sweeps every
+corner of the ranges. The pose is integrated on the ground plane
 (east/north metres, yaw counter-clockwise from east) with the mid-step heading; wheel slip scales
 the ground motion by (1 - slip) while the wheels (and encoders) turn as driven.
 """
@@ -47,6 +60,44 @@ def straight_time_constant_s(motor: MotorParams, robot: RobotParams) -> float:
         n2 * (motor.resistance_ohm * motor.viscous_nms_per_rad + motor.kt_nm_per_a * motor.ke_v_per_radps))
 
 
+DECAY_TOLERANCE = 1e-9
+"""How far above 1 the discretised drive's spectral radius may come out in floating point (the
+exact value is below 1): a growth of 1e-9 per substep takes 7e8 substeps, 8 days at 1 ms, to double."""
+
+
+def discretise(motor: MotorParams, robot: RobotParams, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(A_d, B_d): the exact zero-order-hold discretisation of the drive over ``dt_s``."""
+    n, L, R = motor.gear_ratio, motor.inductance_h, motor.resistance_ohm
+    m_inv = np.linalg.inv(wheel_inertia_matrix(motor, robot))
+    a = np.zeros((4, 4))
+    a[0:2, 0:2] = -R / L * np.eye(2)
+    a[0:2, 2:4] = -motor.ke_v_per_radps * n / L * np.eye(2)
+    a[2:4, 0:2] = m_inv * n * motor.kt_nm_per_a
+    a[2:4, 2:4] = -m_inv * n * n * motor.viscous_nms_per_rad
+    b = np.zeros((4, 2))
+    b[0:2, 0:2] = np.eye(2) / L
+    augmented = np.zeros((6, 6))
+    augmented[:4, :4], augmented[:4, 4:] = a, b
+    phi = expm(augmented * dt_s)
+    return phi[:4, :4], phi[:4, 4:]
+
+
+def drive_inconsistency(motor: MotorParams, robot: RobotParams, dt_s: float) -> str | None:
+    """Why the drive cannot be stepped with these parameters (its discretisation is not finite or
+    does not decay), or None. Within ``sitl.params.LIMITS`` it never says so (module docstring)."""
+    with np.errstate(all="ignore"):
+        try:
+            ad, bd = discretise(motor, robot, dt_s)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            return f"the motor.* and robot.* fields cannot be discretised with physics_dt_s {dt_s:g} s: {exc}"
+        finite = bool(np.all(np.isfinite(ad)) and np.all(np.isfinite(bd)))
+        radius = float(np.max(np.abs(np.linalg.eigvals(ad)))) if finite else math.nan
+    if not finite or not radius <= 1.0 + DECAY_TOLERANCE:
+        return (f"the motor.* and robot.* fields with physics_dt_s {dt_s:g} s give a drive that does not decay "
+                f"in floating point (substep spectral radius {radius:g})")
+    return None
+
+
 class DriveTrain:
     """The two motors, the wheels and the body pose, advanced in fixed substeps of ``dt_s``."""
 
@@ -54,21 +105,9 @@ class DriveTrain:
         self.motor = motor
         self.robot = robot
         self.dt_s = dt_s
-        n, L, R = motor.gear_ratio, motor.inductance_h, motor.resistance_ohm
-        m_inv = np.linalg.inv(wheel_inertia_matrix(motor, robot))
-        a = np.zeros((4, 4))
-        a[0:2, 0:2] = -R / L * np.eye(2)
-        a[0:2, 2:4] = -motor.ke_v_per_radps * n / L * np.eye(2)
-        a[2:4, 0:2] = m_inv * n * motor.kt_nm_per_a
-        a[2:4, 2:4] = -m_inv * n * n * motor.viscous_nms_per_rad
-        b = np.zeros((4, 2))
-        b[0:2, 0:2] = np.eye(2) / L
-        augmented = np.zeros((6, 6))
-        augmented[:4, :4], augmented[:4, 4:] = a, b
-        phi = expm(augmented * dt_s)
+        ad, self._bd = discretise(motor, robot, dt_s)
         # Plain tuples: the substep loop runs on Python floats (numpy scalars are slower here).
-        self._ad = tuple(tuple(float(v) for v in row) for row in phi[:4, :4])
-        self._bd = phi[:4, 4:]
+        self._ad = tuple(tuple(float(v) for v in row) for row in ad)
         self._forced = (0.0, 0.0, 0.0, 0.0)
         self.current_l_a = self.current_r_a = 0.0
         self.wheel_l_radps = self.wheel_r_radps = 0.0

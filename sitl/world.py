@@ -15,6 +15,9 @@ World file: a GeoJSON FeatureCollection (RFC 7946, coordinates [lon, lat]).
   this: how long a ground station takes to upload and arm is not part of the scenario.
 - Optional top-level members ``"home": [lon, lat, alt_m, heading_deg]`` and ``"faults"`` (see
   ``sitl.faults``).
+- Sizes: a circle's radius, a polygon's vertices and a motion path's points reach at most
+  ``WORLD_EXTENT_M`` (10 km) from the first; obstacle speeds are at most ``MAX_OBSTACLE_SPEED_MPS``;
+  the file is a regular file of at most ``MAX_WORLD_BYTES``.
 
 ``World`` keeps the geographic description (what the file says); ``LocalWorld`` is the same world
 projected into east/north metres about the run's home, with analytic obstacle motion, ray casting
@@ -26,6 +29,8 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,11 +39,14 @@ from shapely import affinity
 from shapely.geometry import Point, Polygon
 
 from sitl.faults import FaultError, ScheduledFault, parse_fault
-from sitl.geodesy import LocalFrame
+from sitl.geodesy import WORLD_EXTENT_M, LocalFrame, distances_m
 
 
 MAX_OBSTACLE_SPEED_MPS = 50.0
 """A moving obstacle's speed at most (a car on a road): 1e308 m/s put it at NaN a frame later."""
+MAX_WORLD_BYTES = 4 * 2**20
+"""The largest world file read: 4 MiB holds some ten thousand obstacles (about 300 bytes each);
+reading stops there, so /dev/zero or a runaway file is refused instead of read forever."""
 
 
 class WorldError(ValueError):
@@ -134,12 +142,27 @@ class World:
 
 
 def load_world(path: str | Path) -> World:
-    """Read a world file; WorldError("file: feature 3: what is wrong") on any problem."""
+    """Read a world file; WorldError("file: feature 3: what is wrong") on any problem, also for a
+    file that is not a regular one (a device or FIFO could be read forever) or is over MAX_WORLD_BYTES."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        # non-blocking: opening a FIFO would wait for a writer; only the file's type is read before it is refused
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except OSError as exc:
         raise WorldError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise WorldError(f"{path}: not a regular file (a device, FIFO or directory is not a world file)")
+        with os.fdopen(fd, "rb", closefd=False) as file:
+            data = file.read(MAX_WORLD_BYTES + 1)
+    except OSError as exc:
+        raise WorldError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_WORLD_BYTES:
+        raise WorldError(f"{path}: larger than {MAX_WORLD_BYTES // 2**20} MiB, the most a world file may be (some ten thousand obstacles)")
+    try:
+        text = data.decode("utf-8")
     except UnicodeDecodeError:
         raise WorldError(f"{path}: not UTF-8 text") from None
     try:
@@ -202,6 +225,13 @@ def _lonlat(value: object, what: str) -> tuple[float, float]:
     return lon, lat
 
 
+def _within_extent(points, what: str) -> None:
+    """WorldError unless every [lon, lat] of ``points`` (``what`` 0, 1, ...) is within WORLD_EXTENT_M of the first."""
+    for index, distance in enumerate(distances_m(*points[0], points[1:]), 1):
+        if distance > WORLD_EXTENT_M:
+            raise WorldError(f"{what} {index} is {distance:.0f} m from {what} 0, over {WORLD_EXTENT_M:g} m (a world's extent)")
+
+
 def _parse_home(value: object) -> Home:
     if not isinstance(value, list) or len(value) != 4:
         raise WorldError(f"expected [lon, lat, alt_m, heading_deg], got {value!r}")
@@ -227,8 +257,8 @@ def _parse_feature(feature: object, index: int) -> Obstacle:
         if "radius_m" not in props:
             raise WorldError("a Point obstacle needs properties.radius_m")
         radius = _number(props["radius_m"], "radius_m")
-        if radius <= 0:
-            raise WorldError(f"radius_m must be > 0, got {radius}")
+        if not 0 < radius <= WORLD_EXTENT_M:
+            raise WorldError(f"radius_m must be > 0 and <= {WORLD_EXTENT_M:g} m (a world's extent), got {radius:g}")
         obstacle = Obstacle(ident, "circle", (_lonlat(coords, "Point"),), radius)
     elif kind == "Polygon":
         if not isinstance(coords, list) or not coords:
@@ -245,6 +275,7 @@ def _parse_feature(feature: object, index: int) -> Obstacle:
             raise WorldError("a Polygon needs at least 3 distinct vertices")
         if not Polygon(points).is_valid:
             raise WorldError("Polygon is self-intersecting or degenerate")
+        _within_extent(points, "vertex")
         obstacle = Obstacle(ident, "polygon", tuple(points))
     else:
         raise WorldError(f"unsupported geometry {kind!r} (use Polygon, or Point with radius_m)")
@@ -276,6 +307,7 @@ def _parse_motion(value: object) -> Motion:
         if not isinstance(path, list) or len(path) < 2:
             raise WorldError("motion path must list at least 2 [lon, lat] points")
         points = tuple(_lonlat(p, f"motion path point {i}") for i, p in enumerate(path))
+        _within_extent(points, "motion path point")
         speed = _number(value.get("speed_mps"), "motion speed_mps")
         if not 0 < speed <= MAX_OBSTACLE_SPEED_MPS:
             raise WorldError(f"motion speed_mps must be > 0 and <= {MAX_OBSTACLE_SPEED_MPS:g}, got {speed:g}")

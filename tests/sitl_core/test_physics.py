@@ -112,3 +112,33 @@ def test_sitl_params_defaults_are_consistent():
     assert [m.sensor_id for m in params.rangefinder.sensors] == list(range(6))
     assert {m.orientation for m in params.rangefinder.sensors} == {0, 1, 2, 4, 6, 7}
     assert params.gps.eph_m == pytest.approx(math.hypot(params.gps.white_std_m, params.gps.bias_std_m))
+
+
+def test_every_corner_of_the_ranges_discretises_finite_and_decaying():
+    """The drive is stable for any positive parameters and discretised exactly (module docstring);
+    the ranges keep the exponential in floating point: 2^14 corners of the fields that enter it."""
+    import itertools
+
+    from sitl.params import LIMITS
+    from sitl.physics import drive_inconsistency
+
+    outside_a = {"motor.battery_v", "motor.pwm_neutral_us", "motor.pwm_range_us"}  # they set the input, not the system
+    keys = [k for k in LIMITS if k.startswith(("motor.", "robot.")) and k not in outside_a] + ["physics_dt_s"]
+    assert len(keys) == 14
+    failures = []
+    for corner in itertools.product(*[(LIMITS[k].low, LIMITS[k].high) for k in keys]):
+        values = dict(zip(keys, corner))
+        motor = MotorParams(**{k[len("motor."):]: v for k, v in values.items() if k.startswith("motor.")})
+        robot = RobotParams(**{k[len("robot."):]: v for k, v in values.items() if k.startswith("robot.")})
+        if (why := drive_inconsistency(motor, robot, values["physics_dt_s"])) is not None:
+            failures.append((values, why))
+    assert not failures, failures[:3]
+
+
+def test_a_discretisation_that_overflows_is_reported_not_stepped():
+    from sitl.physics import drive_inconsistency
+
+    assert drive_inconsistency(MotorParams(), RobotParams(), 0.001) is None
+    why = drive_inconsistency(MotorParams(inductance_h=1e-300), RobotParams(), 0.001)  # the NaN that crashed SIMSTATE
+    assert why is not None and "does not decay" in why and "physics_dt_s 0.001 s" in why
+    assert "cannot be discretised" in drive_inconsistency(MotorParams(), RobotParams(track_m=1e-300), 0.001)

@@ -180,6 +180,7 @@ def test_run_time_faults_combine_with_the_schedule():
     ("SIM_WHEEL_SLIP", 1.5, "SIM_WHEEL_SLIP: 1.5 is outside 0..1"),
     ("SIM_RF_FAIL", 2.5, "SIM_RF_FAIL: expected a non-negative integer bitmask"),
     ("SIM_GPS_GLITCH_X", "far", "SIM_GPS_GLITCH_X: expected a number"),
+    ("SIM_GPS_GLITCH_Y", 1e300, r"SIM_GPS_GLITCH_Y: 1e\+300 is outside -10000\.\.10000"),  # wrapped the fix round the Earth
 ])
 def test_bad_run_time_faults_are_refused_and_change_nothing(name, value, message):
     rover = SimRover(SitlParams(), World(), HOME, seed=1)
@@ -255,7 +256,7 @@ def test_model_parameters_are_overridden_by_name():
         ("gps.white_std_m=-1", r"expected a finite number >= 0 and <= 100, got '-1'"),  # numpy: "scale < 0"
         ("gps.white_std_m=nan", "expected a finite number"),
         ("gps.rate_hz=0", "expected a finite number > 0"),  # divided by
-        ("motor.inductance_h=inf", "expected a finite number > 0"),
+        ("motor.inductance_h=inf", "expected a finite number >= 1e-05 and <= 0.1 H"),
         ("gps.satellites=1e300", "<= 255"),  # a uint8 on the wire
         ("rangefinder.max_m=1000", "<= 655.34"),
         ("encoder.ticks_per_rev=0", "> 0"),
@@ -281,3 +282,85 @@ def test_model_parameter_limits_name_fields_and_admit_the_defaults():
     assert set(LIMITS) <= set(numeric), "LIMITS names a field that --set cannot reach"
     for key, default in numeric.items():
         assert LIMITS.get(key, POSITIVE).admits(default), key
+
+
+@pytest.mark.parametrize("assignment", [
+    # each of these printed "ready" and then crashed (NaN in SIMSTATE, ZeroDivisionError, OverflowError)
+    "motor.inductance_h=1e-300", "motor.resistance_ohm=1e300", "motor.ke_v_per_radps=1e300", "motor.kt_nm_per_a=1e300",
+    "robot.wheel_radius_m=1e300", "robot.track_m=1e-300", "motor.gear_ratio=1e300", "robot.footprint_length_m=1e300",
+    "robot.footprint_width_m=1e300", "motor.viscous_nms_per_rad=1e300",
+    "motor.battery_v=1", "motor.pwm_range_us=1e-300", "motor.pwm_neutral_us=1e300", "motor.rotor_inertia_kgm2=1e300",
+    "robot.mass_kg=1e-300", "robot.wheel_inertia_kgm2=1e300", "physics_dt_s=1", "collision_check_s=1e300",
+    "contact_release_m=1e300",
+])
+def test_drive_and_body_fields_outside_their_range_are_refused_naming_field_value_and_range(assignment):
+    from sitl.params import LIMITS, SitlParams, apply_override
+
+    key, _, value = assignment.partition("=")
+    with pytest.raises(ValueError) as err:
+        apply_override(SitlParams(), assignment)
+    limits = LIMITS[key]
+    assert str(err.value) == f"{key}: expected a finite number {limits}, got {value!r}"
+    assert f">= {limits.low:g} and <= {limits.high:g}" in str(limits)
+
+
+def test_every_drive_and_body_field_has_a_finite_range_with_its_unit():
+    from sitl.params import LIMITS, SitlParams
+
+    params = SitlParams()
+    for section in ("motor", "robot"):
+        for f in dataclasses.fields(getattr(params, section)):
+            value = getattr(getattr(params, section), f.name)
+            if isinstance(value, (int, float)):  # robot.yaw_inertia_kgm2 is None: derived from the footprint, not settable
+                limits = LIMITS[f"{section}.{f.name}"]
+                assert math.isfinite(limits.high) and limits.low_included, f.name
+                assert limits.unit or f.name == "gear_ratio", f.name
+
+
+TOY = ["motor.battery_v=6", "motor.resistance_ohm=15", "motor.inductance_h=0.001", "motor.ke_v_per_radps=0.0019",
+       "motor.kt_nm_per_a=0.0019", "motor.gear_ratio=100", "motor.rotor_inertia_kgm2=1e-8", "motor.viscous_nms_per_rad=1e-7",
+       "robot.mass_kg=0.2", "robot.track_m=0.1", "robot.wheel_radius_m=0.02", "robot.wheel_inertia_kgm2=1e-6",
+       "robot.footprint_length_m=0.12", "robot.footprint_width_m=0.1"]
+"""An N20-gearmotor toy: 6 V, 100:1, 300 rpm at the wheel."""
+HUSKY = ["motor.battery_v=24", "motor.resistance_ohm=0.3", "motor.inductance_h=0.0005", "motor.ke_v_per_radps=0.13",
+         "motor.kt_nm_per_a=0.13", "motor.gear_ratio=30", "robot.mass_kg=50", "robot.track_m=0.55", "robot.wheel_radius_m=0.165",
+         "robot.wheel_inertia_kgm2=0.05", "robot.footprint_length_m=0.99", "robot.footprint_width_m=0.67"]
+"""A Clearpath Husky-sized research rover (50 kg, about 1 m/s)."""
+WARTHOG = ["motor.battery_v=48", "motor.resistance_ohm=0.05", "motor.inductance_h=0.0001", "motor.ke_v_per_radps=0.144",
+           "motor.kt_nm_per_a=0.144", "motor.gear_ratio=20", "motor.rotor_inertia_kgm2=0.002", "robot.mass_kg=280",
+           "robot.track_m=1.1", "robot.wheel_radius_m=0.3", "robot.wheel_inertia_kgm2=1.0", "robot.footprint_length_m=1.52",
+           "robot.footprint_width_m=1.38"]
+"""A Clearpath Warthog-sized one (280 kg, about 5 m/s)."""
+
+
+@pytest.mark.parametrize("rover", [TOY, HUSKY, WARTHOG], ids=["toy", "husky", "warthog"])
+def test_small_and_large_rovers_are_in_range_and_drive(rover):
+    from sitl.params import SitlParams, apply_override, inconsistency
+
+    params = SitlParams()
+    for assignment in rover:
+        apply_override(params, assignment)
+    assert inconsistency(params) is None
+    sim = SimRover(params, World(), HOME, seed=1)
+    sim.set_motor_pwm(2000, 1800)
+    drive_for(sim, 3.0)
+    truth = sim.truth()
+    assert all(math.isfinite(v) for v in dataclasses.astuple(truth))
+    assert 0.2 < truth.speed_mps < 8.0
+
+
+@pytest.mark.parametrize("assignments, message", [
+    # each field in range, together 65 m/s: GPS_RAW_INT's speed (a uint16 of cm/s) overflowed mid-run
+    (["motor.battery_v=65", "motor.ke_v_per_radps=0.001", "motor.kt_nm_per_a=10", "motor.resistance_ohm=0.01",
+      "motor.gear_ratio=1", "robot.wheel_radius_m=1", "motor.viscous_nms_per_rad=0"], "top speed of 6.5e+04 m/s"),
+    (["motor.ke_v_per_radps=0.001"], "top speed of 33.6 m/s"),
+    (["robot.track_m=0.05", "physics_dt_s=0.01"], "physics_dt_s 0.01 s turns the rover 0.646 rad per substep"),
+])
+def test_fields_in_range_that_cannot_go_together_are_refused(assignments, message):
+    from sitl.params import SitlParams, apply_override, inconsistency
+
+    params = SitlParams()
+    for assignment in assignments:
+        apply_override(params, assignment)
+    why = inconsistency(params)
+    assert why is not None and message in why and "\n" not in why

@@ -106,6 +106,15 @@ def test_cmac_loop_world_has_a_moving_obstacle_and_passable_gaps():
     (json.dumps(collection(faults=[{"name": "gps_outage", "start_s": 1, "duration_s": 1}])).replace('"start_s": 1', '"start_s": ' + "9" * 5000),
      "faults[0]: gps_outage: 'start_s' must be a number"),
     ("[" * 100_000 + "]" * 100_000, "not a world file: JSON nested too deeply"),
+    # sizes within a world's extent (10 km): a radius of 1e300 m ran with a garbage obstacle after a shapely overflow
+    (collection(circle_feature(0, 5, 1e300)), "feature 0: radius_m must be > 0 and <= 10000 m (a world's extent), got 1e+300"),
+    (collection(circle_feature(0, 5, 10_001)), "feature 0: radius_m must be > 0 and <= 10000 m"),
+    (collection(square_feature(0, 5, 1), {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [
+        [lonlat(0, 0), lonlat(0, 20_000), lonlat(10, 10), lonlat(0, 0)]]}}), "feature 1: vertex 1 is 20000 m from vertex 0, over 10000 m"),
+    (collection(circle_feature(0, 5, 1, motion={"type": "waypoints", "path": [lonlat(0, 5), lonlat(0, 10), [-30.83, 35.36]], "speed_mps": 1})),
+     "feature 0: motion path point 2 is 2000"),  # the antipode
+    (collection(faults=[{"name": "gps_glitch", "start_s": 1, "duration_s": 1, "north_m": 1e300, "east_m": 0}]),
+     "faults[0]: SIM_GPS_GLITCH_X: 1e+300 is outside -10000..10000"),
 ])
 def test_bad_world_files_give_one_line_errors_naming_file_and_feature(tmp_path, doc, message):
     path = write(tmp_path, doc)
@@ -120,6 +129,31 @@ def test_bad_world_files_give_one_line_errors_naming_file_and_feature(tmp_path, 
 def test_missing_file_is_a_world_error(tmp_path):
     with pytest.raises(WorldError, match="cannot read"):
         load_world(tmp_path / "absent.geojson")
+
+
+@pytest.mark.parametrize("kind", ["device", "fifo", "directory"])
+def test_a_file_that_is_not_regular_is_refused_unread(tmp_path, kind):
+    """/dev/zero was read forever; a FIFO without a writer blocks in open()."""
+    import os
+
+    path = {"device": Path("/dev/zero"), "fifo": tmp_path / "world.fifo", "directory": tmp_path}[kind]
+    if kind == "fifo":
+        os.mkfifo(path)
+    with pytest.raises(WorldError) as err:
+        load_world(path)
+    assert str(err.value) == f"{path}: not a regular file (a device, FIFO or directory is not a world file)"
+
+
+def test_a_file_over_the_size_limit_is_refused_after_reading_the_limit(tmp_path):
+    from sitl.world import MAX_WORLD_BYTES
+
+    doc = json.dumps(collection(circle_feature(0, 5, 1)))
+    path = write(tmp_path, doc + " " * (MAX_WORLD_BYTES - len(doc)))
+    assert len(load_world(path).obstacles) == 1  # at the limit: read
+    with path.open("a") as file:
+        file.write(" ")
+    with pytest.raises(WorldError, match=r"larger than 4 MiB, the most a world file may be"):
+        load_world(path)
 
 
 def test_obstacle_motion_velocity_and_waypoint_loops():

@@ -67,6 +67,12 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--set", "gps.white_std_m=-1"], "--set gps.white_std_m: expected a finite number >= 0"),
     (["--set", "gps.white_std_m=nan"], "--set gps.white_std_m: expected a finite number"),
     (["--set", "rangefinder.min_m=5"], "--set rangefinder.min_m 5 must be below rangefinder.max_m 4"),
+    # these printed "ready", then crashed with a traceback mid-run
+    (["--set", "motor.inductance_h=1e-300"], "--set motor.inductance_h: expected a finite number >= 1e-05 and <= 0.1 H, got '1e-300'"),
+    (["--set", "robot.track_m=1e-300"], "--set robot.track_m: expected a finite number >= 0.05 and <= 5 m, got '1e-300'"),
+    (["--set", "motor.gear_ratio=1e300"], "--set motor.gear_ratio: expected a finite number >= 1 and <= 1000, got '1e300'"),
+    (["--set", "motor.ke_v_per_radps=0.001"], "--set the motor.* and robot.* fields give a top speed of 33.6 m/s"),
+    (["--param", "SIM_GPS_GLITCH_X=1e300"], "SIM_GPS_GLITCH_X: 1e+300 is outside -10000..10000"),
     (["--rangefinders", "three"], "invalid choice"),
 ])
 def test_bad_flags_give_one_line_error(capsys, flags: list[str], needle: str) -> None:
@@ -83,6 +89,11 @@ def test_bad_world_files_name_the_file(capsys, tmp_path) -> None:
     bad_feature.write_text(json.dumps({"type": "FeatureCollection", "features": [
         {"type": "Feature", "geometry": {"type": "Point", "coordinates": [149.1, -35.3]}, "properties": {}}]}))
     assert str(bad_feature) in main_error_line(capsys, "--world", str(bad_feature))
+    huge = tmp_path / "huge.geojson"  # ran with a garbage obstacle after a shapely overflow warning
+    huge.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": {"type": "Point", "coordinates": [149.1, -35.3]}, "properties": {"radius_m": 1e300}}]}))
+    assert f"{huge}: feature 0: radius_m must be > 0 and <= 10000 m" in main_error_line(capsys, "--world", str(huge))
+    assert "/dev/zero: not a regular file" in main_error_line(capsys, "--world", "/dev/zero")  # was read forever
 
 
 def test_port_in_use_is_an_error_a_launcher_can_tell_apart() -> None:

@@ -172,6 +172,10 @@ def test_params_and_gps_disable_fault(client) -> None:
     client.set_param("SIM_LINK_LOSS", 250)  # out of range: refused, value unchanged
     received = collect(client, 0.2)
     assert [p.param_value for p in of_type(received, "PARAM_VALUE")] == [0.0]
+    client.set_param("SIM_GPS_GLITCH_X", 1e6)  # farther than a world reaches: refused as a world file's glitch is
+    received = collect(client, 0.2)
+    assert [p.param_value for p in of_type(received, "PARAM_VALUE")] == [0.0]
+    assert any("SIM_GPS_GLITCH_X" in t.text for t in of_type(received, "STATUSTEXT"))
 
 
 def test_nan_and_out_of_range_values_are_refused_and_the_emulator_lives_on(client) -> None:
