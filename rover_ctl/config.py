@@ -117,7 +117,8 @@ class PlannerParams:
     inclusion fences shrunk, by ``robot.footprint_width_m / 2 + clearance_margin_m``."""
     circle_segments: int = 16
     """Vertices of the polygon that stands for an inflated circle (circumscribed, so it never
-    cuts into the clearance); more vertices: shorter paths, a bigger graph."""
+    cuts into the clearance); more vertices: shorter paths, a bigger graph (over its node budget
+    the planner refuses to plan: docs/missions.md)."""
     lookahead_m: float = 3.0
     """Carrot distance: the path target is this far along the path beyond the rover's projection."""
     projection_window_m: float = 10.0

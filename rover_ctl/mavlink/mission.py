@@ -25,7 +25,7 @@ Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemPro
   point), the same rules as ``rover-ctl mission check``. The first problem refuses the upload with
   the MAV_MISSION_RESULT of the field it is about (``RESULT_BY_FIELD``: a bad radius or vertex
   count is INVALID_PARAM1, a latitude INVALID_PARAM5_X, a frame UNSUPPORTED_FRAME, a command of
-  another list UNSUPPORTED, ...).
+  another list UNSUPPORTED, a fence too complex for the planner NO_SPACE, ...).
 * Atomicity: received items go to a scratch list. Only a complete, valid upload is passed to
   ``commit(new_mission, mission_type)`` (the shell persists it there); if ``commit`` raises, the upload is
   refused with MAV_MISSION_ERROR and the stored mission stays the old one.
@@ -70,9 +70,10 @@ RESULT_BY_FIELD = {
     "x": mav.MAV_MISSION_INVALID_PARAM5_X,
     "y": mav.MAV_MISSION_INVALID_PARAM6_Y,
     "z": mav.MAV_MISSION_INVALID_PARAM7,
+    "size": mav.MAV_MISSION_NO_SPACE,
 }
-"""MAV_MISSION_RESULT of a refused upload, by the item field its first problem is about (else
-MAV_MISSION_INVALID)."""
+"""MAV_MISSION_RESULT of a refused upload, by the item field its first problem is about ("size":
+the list as a whole; else MAV_MISSION_INVALID)."""
 
 Sender = tuple[int, int]
 

@@ -4,7 +4,8 @@ Errors refuse the mission: coordinates out of range, a value MISSION_ITEM_INT ca
 (command or frame beyond its field, an infinite or float32-overflowing param, an x/y beyond int32),
 a frame MAVLink does not define, a DO_JUMP to an item that does not exist, a malformed fence
 (vertex count that does not match its run, fewer than 3 vertices, a self-intersecting polygon,
-radius <= 0). Warnings load it: commands this rover does not carry out (skipped by the executor)
+radius <= 0), a fence too complex for the planner (more than ``MAX_PLANNER_NODES`` graph nodes,
+``planner_nodes``). Warnings load it: commands this rover does not carry out (skipped by the executor)
 and speeds above the rover's top speed (the executor clamps them). Pure: the caller decides what to
 do. The same rules serve ``rover-ctl mission check`` and an upload over the mission protocol; each
 error is a ``Problem`` (a str) that also names the item field it is about, from which the protocol
@@ -15,10 +16,11 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 
 from shapely.geometry import Polygon
 
+from rover_ctl.config import PlannerParams
 from rover_ctl.mission.model import (
     FENCE_CIRCLE_COMMANDS,
     FENCE_COMMANDS,
@@ -62,10 +64,24 @@ INT32_MAX = 2**31 - 1
 KNOWN_FRAMES = frozenset(mav.enums["MAV_FRAME"])
 PARAM_FIELDS = ("param1", "param2", "param3", "param4", "z")
 
+MAX_PLANNER_NODES = 800
+"""Most graph nodes the planner (``rover_ctl.navigation.planner``) builds its visibility graph
+over, as ``planner_nodes`` counts them (50 exclusion circles at the default 16 vertices, 12 at
+PLN_CIRCLE_SEGS 64). The build is quadratic in the nodes and runs in the control step (40 ms at
+25 Hz): 800 nodes took 46 ms on the 2-core x86-64 machine this was written on (exclusion circles,
+every vertex a node; 30 ms at 640, 67 ms at 960, 110-140 ms at 1120), and a Raspberry Pi is
+several times slower (not measured). A fence above it is refused (an upload with
+MAV_MISSION_NO_SPACE, ``rover-ctl mission check`` with an error); the planner never builds a
+graph above it, whatever made it so: it says "too complex to plan" instead (docs/missions.md)."""
+FENCE_CIRCLE_SEGMENTS = PlannerParams.circle_segments
+"""The planner's vertices per circle (PLN_CIRCLE_SEGS) a fence is counted with unless the caller
+says otherwise: the default, as neither ``mission check`` nor an upload knows the live value."""
+
 
 class Problem(str):
     """One validation error: its one-line text, and ``field``, the MissionItem attribute it is
-    about ("command", "frame", "param1".."param4", "x", "y", "z"), or "item" for the whole item."""
+    about ("command", "frame", "param1".."param4", "x", "y", "z"), "item" for the whole item, or
+    "size" when the list as a whole is too big for the rover (the planner's node budget)."""
 
     field: str
 
@@ -214,7 +230,7 @@ def polygon_crosses_itself(vertices: list[MissionItem]) -> bool:
     return not Polygon(points).is_valid
 
 
-def _check_fence(mission: Mission, label, errors: list[str]) -> None:
+def _check_fence(mission: Mission, label, errors: list[str], circle_segments: int | None) -> None:
     fence = mission.fence
     for start, stop in polygon_runs(fence):
         where = label(MissionType.FENCE, start)
@@ -234,6 +250,61 @@ def _check_fence(mission: Mission, label, errors: list[str]) -> None:
     returns = sum(item.command == Cmd.NAV_FENCE_RETURN_POINT for item in fence)
     if returns > 1:
         errors.append(Problem(f"{label(MissionType.FENCE, 0)}: the fence has {returns} return points (at most 1)"))
+    if circle_segments is not None:
+        nodes = fence_nodes(fence, circle_segments)
+        if nodes > MAX_PLANNER_NODES:
+            circles = sum(item.command in FENCE_CIRCLE_COMMANDS for item in fence)
+            errors.append(Problem(
+                f"{label(MissionType.FENCE, 0)}: the fence is too complex for the planner: {nodes} nodes, max {MAX_PLANNER_NODES} "
+                f"({circles} circles x {circle_segments} vertices, polygons {nodes - circles * circle_segments})",
+                "size",
+            ))  # fmt: skip
+
+
+def planner_nodes(circles: int, rings: Iterable[tuple[Sequence[tuple[float, float]], bool]], segments: int) -> int:
+    """The planner's graph nodes for ``circles`` circles and polygon ``rings`` (``(vertices,
+    grown)``), at ``segments`` vertices per circle (PLN_CIRCLE_SEGS): the vertices of the shapes
+    it inflates them into, an upper bound of its nodes (only the free space's reflex vertices are
+    nodes: an inclusion circle, for one, makes none)."""
+    return circles * segments + sum(ring_vertices(vertices, grown, segments) for vertices, grown in rings)
+
+
+def ring_vertices(vertices: Sequence[tuple[float, float]], grown: bool, segments: int) -> int:
+    """Vertices of a polygon ring (x, y in any frame that keeps angles) once the planner inflates
+    it (``grown``: an exclusion zone or obstacle) or shrinks it (an inclusion fence) with round
+    corners: one per corner, and at a corner that turns by an angle t away from the zone (convex
+    when grown, concave when shrunk) at most t / (90 deg / (segments // 4)) + 1 more, the arc's
+    (shapely's quad_segs; a turn of nearly 180 deg adds segments // 2 + 1). An upper bound: the
+    buffer rounds each arc's chord count and drops vertices that come too close."""
+    points = [p for k, p in enumerate(vertices) if p != vertices[k - 1]] if len(vertices) > 1 else list(vertices)
+    n = len(points)
+    if n < MIN_POLYGON_VERTICES:
+        return n
+    area2 = sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(points, points[1:] + points[:1]))
+    away = 1.0 if (area2 > 0) == grown else -1.0  # the sign of a turn that makes an arc
+    step = math.pi / 2 / max(1, segments // 4)
+    total = 0.0
+    for k in range(n):
+        (ax, ay), (bx, by), (cx, cy) = points[k - 1], points[k], points[(k + 1) % n]
+        ux, uy, vx, vy = bx - ax, by - ay, cx - bx, cy - by
+        turn = math.atan2(ux * vy - uy * vx, ux * vx + uy * vy) * away
+        total += 1.0 + (turn / step + 1.0 if turn > 0 else 0.0)
+    return math.ceil(total)
+
+
+def fence_nodes(fence: Sequence[MissionItem], segments: int = FENCE_CIRCLE_SEGMENTS) -> int:
+    """``planner_nodes`` of a fence list: its circle items and its polygon runs, as they stand
+    (longitude scaled by the cosine of the latitude, so that corner angles are the ground's)."""
+    circles = sum(item.command in FENCE_CIRCLE_COMMANDS for item in fence)
+    rings, unplaced = [], 0
+    for start, stop in polygon_runs(list(fence)):
+        run = fence[start:stop]
+        if all(latlon_ok(item.x, item.y) for item in run):  # NaN is not
+            scale = math.cos(math.radians(run[0].x))
+            rings.append(([(item.y * scale, item.x) for item in run], run[0].command != Cmd.NAV_FENCE_POLYGON_VERTEX_INCLUSION))
+        else:  # reported per item; counted as if every corner turned fully
+            unplaced += len(run) * (segments // 2 + 2)
+    return planner_nodes(circles, rings, segments) + unplaced
 
 
 def _check_rally(mission: Mission, label, errors: list[str]) -> None:
@@ -246,10 +317,13 @@ def validate(
     max_speed_mps: float,
     labels: Mapping[tuple[MissionType, int], str] | None = None,
     parts: Iterable[MissionType] = tuple(MissionType),
+    circle_segments: int | None = FENCE_CIRCLE_SEGMENTS,
 ) -> tuple[list[str], list[str]]:
     """``(errors, warnings)``, one line each, prefixed with ``labels[(type, index)]`` when given
     (file:line) or else with the item's place ("mission item 3" in wire seq, "fence item 0").
-    Errors are ``Problem``s. ``parts``: the lists to check (home goes with MISSION)."""
+    Errors are ``Problem``s. ``parts``: the lists to check (home goes with MISSION).
+    ``circle_segments``: the PLN_CIRCLE_SEGS the fence's planner nodes are counted at (None: no
+    node budget, for the planner, which counts its own)."""
     errors: list[str] = []
     warnings: list[str] = []
 
@@ -265,7 +339,7 @@ def validate(
     if MissionType.MISSION in parts:
         _check_mission(mission, max_speed_mps, label, errors, warnings)
     if MissionType.FENCE in parts:
-        _check_fence(mission, label, errors)
+        _check_fence(mission, label, errors, circle_segments)
     if MissionType.RALLY in parts:
         _check_rally(mission, label, errors)
     return errors, warnings

@@ -26,6 +26,18 @@ Persistent obstacles (polygons of places the rangefinders echo from repeatedly,
 (their cells already reach beyond the echoes), and they never make a goal unreachable by
 themselves: a goal inside one is treated as one in the clearance band.
 
+Node budget: the graph's build is quadratic in its nodes and runs in the control step, so the
+planner never builds one over ``MAX_PLANNER_NODES`` (``rover_ctl.mission.validate``, where the
+figures behind it are), counted before any geometry by ``node_count``: the vertices of the inflated
+shapes (``planner_nodes``: circles x ``circle_segments``, each polygon's corners and their round
+arcs), an upper bound of the nodes. Over it -- a fence stored before the budget, a raised
+``circle_segments``, many persistent obstacles -- ``plan_leg`` returns ``Path.error`` "too complex
+to plan: N nodes, max M" (the daemon holds, as for any missing path; ``PathFollower`` then plans
+without the persistent obstacles), except that blocked circles over it are forgotten early, the
+oldest first. Uploads and ``rover-ctl mission check`` refuse a fence over it at the default
+``circle_segments``. The tangent test runs on all vertex pairs a block of rows at a time
+(``PAIR_BLOCK``), so memory stays small.
+
 Circles become regular ``PlannerParams.circle_segments``-gons that circumscribe the inflated
 circle, and polygon corners are rounded with the chord error compensated, so the polygonal
 approximation never cuts into the clearance. Graph nodes sit ``NODE_OFFSET_M`` further out than
@@ -43,6 +55,7 @@ API:
       .plan_leg(start_en, goal_en) -> Path        Path.error is None when a path was found
       .plan_route(start_en, goals_en) -> Path     the legs joined (for the planned-path plot)
       .is_inside_fence(point_en) -> bool          fence breach test (raw fence, no clearance)
+      .node_count() -> int                        graph nodes at most (the budget's count)
       .block(now_s, center_en, radius_m=None)     temporary circular obstacle (a blocked leg)
       .set_persistent(polygons) -> bool           replace the persistent obstacles (True: changed)
       .near_persistent(path, s_from_m) -> bool    the path beyond s_from_m would touch one
@@ -72,7 +85,7 @@ from shapely.ops import nearest_points, unary_union
 
 from rover_ctl.config import PlannerParams, RobotParams
 from rover_ctl.mission.model import FENCE_CIRCLE_COMMANDS, Cmd, Mission, MissionItem, MissionType, polygon_runs
-from rover_ctl.mission.validate import validate
+from rover_ctl.mission.validate import MAX_PLANNER_NODES, planner_nodes, validate
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +99,9 @@ TANGENT_TOLERANCE = 1e-9
 
 UNBOUNDED_M = 1.0e6
 """Half-size of the square that stands for the plane when there is no inclusion fence."""
+
+PAIR_BLOCK = 1 << 16
+"""Vertex pairs tested for tangency at once while the graph is built (bounds its memory)."""
 
 
 @dataclass(frozen=True)
@@ -120,7 +136,7 @@ class Fence:
     def checked(cls, items: Sequence[MissionItem], to_enu: Callable[[float, float], EN]) -> tuple["Fence", list[str]]:
         """``(fence of the valid parts, why each other part was left out)``."""
         mission = Mission(fence=list(items))
-        errors, _ = validate(mission, math.inf, parts=(MissionType.FENCE,))
+        errors, _ = validate(mission, math.inf, parts=(MissionType.FENCE,), circle_segments=None)
         ignored = [str(e) for e in errors]
         polygons: dict[bool, list] = {True: [], False: []}
         for (start, stop), polygon in zip(polygon_runs(mission.fence), mission.fence_polygons()):
@@ -269,6 +285,52 @@ def _tangent(at: np.ndarray, prev: np.ndarray, nxt: np.ndarray, other: np.ndarra
     return _sine(d, prev - at) * _sine(d, nxt - at) >= -TANGENT_TOLERANCE
 
 
+def _tangent_pairs(pts: np.ndarray, prev: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertex pairs (i < j, in row order) whose line is ``_tangent`` at both ends: the same
+    arithmetic as ``_tangent`` on every pair, a block of rows at a time against all vertices
+    (broadcast, no index arrays of all the pairs), so memory stays at ``PAIR_BLOCK`` pairs."""
+    n = len(pts)
+    found_i, found_j = [np.zeros(0, dtype=np.intp)], [np.zeros(0, dtype=np.intp)]
+    rows = max(1, PAIR_BLOCK // max(n, 1))
+    to_prev, to_next = prev - pts, nxt - pts
+    # The far end's side: the line from j towards i is -d, and cross(-d, u) == cross(d, -u) exactly.
+    far = _sine_each(to_prev, to_next, negate=True)
+    for first in range(0, n - 1, rows):
+        block = np.arange(first, min(n - 1, first + rows))
+        d = pts[None, :, :] - pts[block, None, :]  # (rows, n, 2): from each vertex of the block to every vertex
+        near = _sine_each(to_prev[block], to_next[block])
+        ok = (near(d) >= -TANGENT_TOLERANCE) & (far(d) >= -TANGENT_TOLERANCE) & (np.arange(n)[None, :] > block[:, None])
+        r, c = np.nonzero(ok)
+        found_i.append(block[r])
+        found_j.append(c)
+    return np.concatenate(found_i), np.concatenate(found_j)
+
+
+def _sine_each(to_prev: np.ndarray, to_next: np.ndarray, negate: bool = False) -> Callable[[np.ndarray], np.ndarray]:
+    """``d -> _sine(d, to_prev) * _sine(d, to_next)`` for directions ``d`` of shape (rows, n, 2):
+    ``to_prev``/``to_next`` of shape (rows, 2) go with the rows, of shape (n, 2) with the columns.
+    ``negate``: for -to_prev and -to_next."""
+    sign = -1.0 if negate else 1.0
+    axis = 0 if negate else 1  # the columns' vectors broadcast over the rows, the rows' over the columns
+
+    def column(a: np.ndarray) -> np.ndarray:
+        return np.expand_dims(a, axis)
+
+    ux, uy, vx, vy = (column(sign * a) for a in (to_prev[:, 0], to_prev[:, 1], to_next[:, 0], to_next[:, 1]))
+    nu, nv = column(np.hypot(to_prev[:, 0], to_prev[:, 1])), column(np.hypot(to_next[:, 0], to_next[:, 1]))
+
+    def product(d: np.ndarray) -> np.ndarray:
+        dx, dy = d[..., 0], d[..., 1]
+        nd = np.hypot(dx, dy)
+        return _ratio(dx * uy - dy * ux, nd * nu) * _ratio(dx * vy - dy * vx, nd * nv)
+
+    return product
+
+
+def _ratio(cross: np.ndarray, norms: np.ndarray) -> np.ndarray:
+    return np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
+
+
 def _sine(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Row-wise sine of the angle from u to v (0 where either is zero)."""
     cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
@@ -337,8 +399,31 @@ class Planner:
             region = inside if region is None else region.intersection(inside)
         return region, zones
 
+    def node_count(self) -> int:
+        """The graph nodes the fence, known obstacles, blocked circles and persistent obstacles
+        can make at the current ``circle_segments`` (an upper bound, see ``planner_nodes``)."""
+        circles = len(self._obstacle_circles) + len(self.fence.exclusion_circles) + len(self.fence.inclusion_circles) + len(self._blocked)
+        rings = [(p, False) for p in self.fence.inclusion_polygons] + [(p, True) for p in self.fence.exclusion_polygons]
+        for shape in self._obstacle_polygons + self._persistent:
+            for poly in _polygons(shape):  # a hole of a grown zone shrinks
+                rings += [(poly.exterior.coords[:-1], True)] + [(ring.coords[:-1], False) for ring in poly.interiors]
+        return planner_nodes(circles, rings, self.params.circle_segments)
+
     def _rebuild(self) -> None:
         self._built_for = self._geometry()
+        nodes = self.node_count()
+        segments = self.params.circle_segments
+        unblocked = nodes - segments * len(self._blocked)
+        if nodes > MAX_PLANNER_NODES >= unblocked:
+            # Blocked circles are temporary detours: the oldest go early rather than the plan.
+            fit = (MAX_PLANNER_NODES - unblocked) // segments
+            log.warning("planner: %d blocked area(s) forgotten early (max %d graph nodes)", len(self._blocked) - fit, MAX_PLANNER_NODES)
+            self._blocked = self._blocked[len(self._blocked) - fit :]
+            nodes = self.node_count()
+        if nodes > MAX_PLANNER_NODES:
+            self._refuse(nodes)  # before the geometry, whose cost grows with the vertices too
+            return
+        self._too_complex = None
         region, zones = self._inflated(0.0)
         node_region, node_zones = self._inflated(NODE_OFFSET_M)
         if region is None:  # no inclusion fence: a box far beyond any mission bounds the plane
@@ -347,16 +432,27 @@ class Planner:
         self._node_free = node_region.difference(node_zones)
         shapely.prepare(self._free)
         pts, self._prev, self._next = _reflex_vertices(self._node_free)
+        if len(pts) > MAX_PLANNER_NODES:  # never, as node_count is an upper bound; but never build it
+            self._refuse(len(pts))
+            return
         self._pts = pts
         self._nodes = [(float(e), float(n)) for e, n in pts]
         self._graph = nx.Graph()
         self._graph.add_nodes_from(range(len(pts)))
-        i, j = np.triu_indices(len(pts), k=1)
-        useful = _tangent(pts[i], self._prev[i], self._next[i], pts[j]) & _tangent(pts[j], self._prev[j], self._next[j], pts[i])
-        i, j = i[useful], j[useful]
+        i, j = _tangent_pairs(pts, self._prev, self._next)
         visible = self._visible(pts[i], pts[j])
-        for a, b in zip(i[visible], j[visible]):
-            self._graph.add_edge(int(a), int(b), weight=math.dist(self._nodes[a], self._nodes[b]))
+        self._graph.add_weighted_edges_from(
+            (int(a), int(b), math.dist(self._nodes[a], self._nodes[b])) for a, b in zip(i[visible], j[visible])
+        )
+
+    def _refuse(self, nodes: int) -> None:
+        """Over the node budget: no graph (its build is quadratic in the nodes); every plan_leg
+        says why until a rebuild fits."""
+        self._too_complex = f"too complex to plan: {nodes} nodes, max {MAX_PLANNER_NODES}"
+        log.warning("planner: %s (fence, obstacles, circle_segments %d)", self._too_complex, self.params.circle_segments)
+        self._free = self._node_free = Polygon()
+        self._graph, self._nodes = nx.Graph(), []
+        self._pts = self._prev = self._next = np.zeros((0, 2))
 
     def _visible(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         lines = shapely.linestrings(np.stack([a, b], axis=1))
@@ -417,6 +513,8 @@ class Planner:
             return Path((start_en,), error=reason)
         if self._built_for != self._geometry():
             self._rebuild()
+        if self._too_complex is not None:
+            return Path((start_en,), error=self._too_complex)
         start_free, goal_free = self._to_free(start_en), self._to_free(goal_en)
         if start_free is None or goal_free is None:
             return Path((start_en,), error="no free space: the inclusion fence is narrower than the rover's clearance")
