@@ -324,6 +324,10 @@ class GcsParams:
     """The vehicle's STATUSTEXTs this urgent or more (MAV_SEVERITY: 0 emergency .. 7 debug; 4 =
     WARNING) are passed on to the ground stations as the vehicle said them: behind the daemon the
     autopilot's own reasons ("PreArm: ...", ArduPilot's CRITICAL) reach nobody else. -1: none."""
+    param_save_s: float = 1.0
+    """Parameters set from a ground station are written to ``params.parm`` at most this often: the
+    first change at once, later ones when this long has passed since the last write, and all on
+    shutdown; a crash loses at most this long of changes (the answer reflects them at once)."""
     param_send_rate_hz: float = 50.0
     """PARAM_VALUE messages per second while answering PARAM_REQUEST_LIST (about 2.5 kB/s, under
     half of a 57600 baud telemetry radio)."""

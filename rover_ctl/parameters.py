@@ -367,6 +367,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("gcs.signing_timestamp_save_s", "GCS_SIGN_SAVE_S", 1.0, 3600.0, START, {}),
     ("gcs.mission_upload_margin_s", "GCS_MIS_MARGIN", 0.0, 3600.0, START, {}),
     ("gcs.mission_upload_holdoff_s", "GCS_MIS_HOLDOFF", 0.0, 600.0, START, {}),
+    ("gcs.param_save_s", "GCS_PARAM_SAVE_S", 0.1, 60.0, START, {}),
     ("gcs.client_item_retry_s", "CLI_ITEM_RETRY", 0.01, 60.0, CONFIG, {}),
     ("navigator.paper_range_units_per_m", "NAV_RNG_SCALE", 0.01, 1000.0, RW, {"units": "1/m"}),
     ("navigator.missing_range_m", "NAV_MISSING_RNG", 0.0, 100.0, RW, {}),
