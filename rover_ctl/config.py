@@ -298,6 +298,15 @@ class GcsParams:
     protocol's default timeout, 1500 ms)."""
     mission_max_items: int = 700
     """Largest list (wire items, home included) accepted per mission type."""
+    mission_upload_margin_s: float = 10.0
+    """Upload deadline: one transaction (a sender's upload of one mission type, restarts included)
+    must end within ``count * mission_upload_timeout_s`` plus this after its first MISSION_COUNT,
+    or it is cancelled: an upload that keeps making progress takes at most the first term, and this
+    covers a client's resent COUNTs (5, 1.5 s apart). A repeated COUNT does not extend it."""
+    mission_upload_holdoff_s: float = 5.0
+    """A sender whose upload was cancelled at its deadline (``mission_upload_margin_s``) may not
+    start another of the same mission type for this long, so that another ground station (which
+    resends its COUNT every 1.5 s) gets its turn."""
     max_messages_per_poll: int = 100
     """GCS link: messages read per loop turn at most, so a flood cannot starve the control loop."""
     mission_store_path: str = "~/.local/state/rover-ctl/mission.json"
@@ -316,6 +325,10 @@ class GcsParams:
     """The vehicle's STATUSTEXTs this urgent or more (MAV_SEVERITY: 0 emergency .. 7 debug; 4 =
     WARNING) are passed on to the ground stations as the vehicle said them: behind the daemon the
     autopilot's own reasons ("PreArm: ...", ArduPilot's CRITICAL) reach nobody else. -1: none."""
+    param_save_s: float = 1.0
+    """Parameters set from a ground station are written to ``params.parm`` at most this often: the
+    first change at once, later ones when this long has passed since the last write, and all on
+    shutdown; a crash loses at most this long of changes (the answer reflects them at once)."""
     param_send_rate_hz: float = 50.0
     """PARAM_VALUE messages per second while answering PARAM_REQUEST_LIST (about 2.5 kB/s, under
     half of a 57600 baud telemetry radio)."""

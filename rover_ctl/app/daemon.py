@@ -296,7 +296,7 @@ class Daemon:
         self.close()
 
     def close(self) -> None:
-        for closeable in (self.gcs, self.link, self.csv, self.events, *self.tlogs):
+        for closeable in (self.gcs, self.table, self.link, self.csv, self.events, *self.tlogs):
             if closeable is not None:
                 closeable.close()
 
@@ -325,6 +325,7 @@ class Daemon:
         self._check_streams()
         self._report_link()
         self.gcs.poll(time.monotonic())
+        self.table.flush()  # parameters set from a ground station: written at most every gcs.param_save_s
         self._note_gcs_heartbeat()
         self._send_telemetry()
         # Sleep until the next message even after a busy turn (a turn that only finds the sockets

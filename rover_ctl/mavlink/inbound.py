@@ -12,6 +12,10 @@ looks at every field a microservice reads and returns a ``Verdict``:
 * drop: no answer exists (a SET_MODE to an unknown mode, a message for another component, a frame
   that failed its CRC): counted in ``Inbound.dropped`` by reason.
 
+Counters are keyed by fixed reasons (``DROP_REASONS``), never by what a frame carries: a stranger
+sending 100,000 distinct mode numbers makes one key, not 100,000. The offending value goes to a
+debug line (``Verdict.detail``), at most one a second (``rover_ctl.mavlink.ratelog``).
+
 PARAM_SET is checked by the parameter service itself (``rover_ctl.parameters``: finite, in range,
 settable), which answers a refusal as ArduPilot does: a STATUSTEXT with the reason and the value
 kept, echoed in PARAM_VALUE.
@@ -41,6 +45,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 
 from rover_ctl.config import GcsParams
+from rover_ctl.mavlink.ratelog import LogLimit
 from rover_ctl.vocabulary import mav
 
 log = logging.getLogger(__name__)
@@ -55,6 +60,12 @@ ARM_VALUES = (0.0, 1.0)
 """ARM_DISARM param1: 0 disarm, 1 arm; anything else is not a request to do either."""
 COMMANDS = ("COMMAND_LONG", "COMMAND_INT")
 UNFINISHED = "unfinished frame at the end of a datagram"
+BAD_DATA = "bad data (CRC, length or unknown message)"
+OTHER_COMPONENT = "command for another component"
+UNKNOWN_MODE = "SET_MODE to an unknown mode"
+BAD_PARAM = "command param not what the command needs"
+DROP_REASONS = (BAD_DATA, OTHER_COMPONENT, UNKNOWN_MODE, UNFINISHED)
+"""Every key ``Inbound.dropped`` can have (reasons carry no values: a frame cannot add keys)."""
 
 
 @dataclass(frozen=True)
@@ -63,6 +74,8 @@ class Verdict:
     reason: str = ""
     reply: Any = None
     """The protocol's refusal to send back, when it has one."""
+    detail: str = ""
+    """The offending value, for the (rate-limited) debug line only."""
 
 
 PASS = Verdict(True)
@@ -100,38 +113,42 @@ class Inbound:
         if isinstance(conn, mavutil.mavudp):
             conn.recv = DatagramFraming(conn.recv, conn.mav, lambda: self._drop(UNFINISHED))
         self.dropped: Counter[str] = Counter()
-        """Messages dropped without an answer, by reason."""
+        """Messages dropped without an answer, by reason (one of ``DROP_REASONS``)."""
         self.refused = 0
         """Messages answered with the protocol's refusal."""
         self.failures: Counter[tuple[str, str]] = Counter()
-        """Handler exceptions caught at the link edge, by (message type, exception type)."""
+        """Handler exceptions caught at the link edge, by (message type, exception type): bounded by
+        the dialect's message names and the exception classes the handlers can raise."""
+        self._drop_log = LogLimit(log)
+        self._refusal_log = LogLimit(log)
 
     def check(self, msg) -> Verdict:
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            return self._drop("bad data (CRC, length or unknown message)")
+            return self._drop(BAD_DATA)
         if kind in COMMANDS:
             verdict = self._command(msg)
         elif kind == "SET_MODE":
-            verdict = PASS if msg.custom_mode in ROVER_MODES else Verdict(False, f"SET_MODE to unknown mode {msg.custom_mode}")
+            verdict = PASS if msg.custom_mode in ROVER_MODES else Verdict(False, UNKNOWN_MODE, detail=f"custom_mode {msg.custom_mode}")
         else:
             verdict = PASS
         if verdict.ok:
             return verdict
         if verdict.reply is not None:
             self.refused += 1
-            log.debug("refused %s: %s", kind, verdict.reason)
+            self._refusal_log.log(logging.DEBUG, "refused %s: %s (%s)", kind, verdict.reason, verdict.detail)
         else:
-            self.dropped[verdict.reason] += 1
+            self._drop(verdict.reason, verdict.detail)
         return verdict
 
-    def _drop(self, reason: str) -> Verdict:
+    def _drop(self, reason: str, detail: str = "") -> Verdict:
         self.dropped[reason] += 1
+        self._drop_log.log(logging.DEBUG, "dropped: %s%s", reason, f" ({detail})" if detail else "")
         return Verdict(False, reason)
 
     def _command(self, msg) -> Verdict:
         if getattr(msg, "target_component", 0) not in (0, self.params.component_id):
-            return Verdict(False, "command for another component")
+            return Verdict(False, OTHER_COMPONENT)
         for slot, valid, wanted, default in PARAM_RULES.get(msg.command, ()):
             value = getattr(msg, slot)
             if default is not None and math.isnan(value):
@@ -141,7 +158,7 @@ class Inbound:
                 ack = mav.MAVLink_command_ack_message(
                     msg.command, mav.MAV_RESULT_DENIED, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
                 )
-                return Verdict(False, f"command {msg.command}: {slot} {value!r} is not {wanted}", ack)
+                return Verdict(False, BAD_PARAM, ack, f"command {msg.command}: {slot} {value!r} is not {wanted}")
         return PASS
 
     def failed(self, msg, exc: BaseException) -> None:

@@ -12,13 +12,23 @@ Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemPro
   ``Mission.home`` (lat = lon = 0 means "no home"); a download reports ``vehicle_home`` (the
   daemon's real home, once it has one) or else the stored mission's home at seq 0.
 * Upload: MISSION_COUNT -> MISSION_REQUEST_INT(seq) -> MISSION_ITEM_INT (or legacy MISSION_ITEM)
-  ... -> MISSION_ACK. A repeated MISSION_COUNT from the uploading sender restarts the upload;
-  any other sender trying to upload, clear or send items meanwhile gets MAV_MISSION_DENIED. An
-  out-of-sequence item is not fatal: a later one makes us re-request the expected seq at once,
-  an earlier one (a duplicate) is ignored. The expected seq is re-requested every
+  ... -> MISSION_ACK. Each mission type is its own transaction, as in ArduPilot (one
+  ``MissionItemProtocol`` per type): a repeated MISSION_COUNT from the uploading sender restarts
+  the upload of that type; any other sender trying to upload, clear or send items of that type
+  meanwhile gets MAV_MISSION_DENIED (a clear of all types, if any type is being uploaded by
+  another). An out-of-sequence item is not fatal: a later one makes us re-request the expected
+  seq at once, an earlier one (a duplicate) is ignored. The expected seq is re-requested every
   ``mission_item_retry_s`` without an answer; after ``mission_upload_timeout_s`` without progress
   the upload is cancelled (MAV_MISSION_OPERATION_CANCELLED) and the stored mission is untouched.
   If the final ACK is lost and the sender repeats the last item, the ACK is repeated.
+* Deadline: a transaction must end ``upload_budget_s(count)`` after its first COUNT
+  (``count * mission_upload_timeout_s + mission_upload_margin_s``: each item may take up to the
+  no-progress timeout, the margin covers resent COUNTs). A restart does not extend it, nor does
+  a COUNT from the same sender within ``mission_upload_timeout_s`` of a no-progress cancel (a
+  restart too). At the deadline the upload is cancelled as for a timeout, and its sender's COUNTs
+  of that type are DENIED for ``mission_upload_holdoff_s`` so that another sender can start:
+  resending COUNTs cannot hold the type for ever. (A stranger that changes its system id is not
+  held off; MAVLink signing is what keeps strangers out.)
 * Validation at the boundary: each item is checked as it arrives with the item rules of
   ``rover_ctl.mission.validate`` (``check_item``), and the complete list with all of them
   (``validate``: DO_JUMP targets, polygon vertex counts and self-intersection, at most one return
@@ -35,7 +45,9 @@ Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemPro
   other than MISSION, FENCE or RALLY (ALL, 255, only makes sense for a clear) gets
   MAV_MISSION_UNSUPPORTED. A stored value MISSION_ITEM_INT cannot carry (a plan stored by an older
   version) is sent as 0 (NaN x/y) or clamped, never a failure to pack.
-* MISSION_CLEAR_ALL (one type or MAV_MISSION_TYPE_ALL) commits an emptied mission and ACKs.
+* MISSION_CLEAR_ALL (one type or MAV_MISSION_TYPE_ALL) commits an emptied mission and ACKs. A
+  clear (or a COUNT of 0) that changes nothing, the list being empty already, is ACCEPTED without
+  a commit: no store write, no re-plan (a flood of them costs no disk work).
 * MISSION_SET_CURRENT asks ``set_current(seq) -> bool`` (the executor) and answers
   MISSION_CURRENT, or a STATUSTEXT warning when refused. ``mission_current`` and
   ``item_reached`` build the broadcasts the daemon sends as the mission runs.
@@ -205,9 +217,22 @@ class _Upload:
     sender: Sender
     mission_type: int
     count: int
+    deadline_s: float
+    """The transaction ends by then (set by its first COUNT; restarts keep it)."""
     received: list[MissionItem] = field(default_factory=list)
     last_request_s: float = 0.0
     last_progress_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class _Lapsed:
+    """The last cancelled upload of a mission type: a COUNT from ``sender`` before
+    ``restart_until_s`` restarts it (keeping ``deadline_s``); before ``barred_until_s`` it is DENIED."""
+
+    sender: Sender
+    deadline_s: float
+    restart_until_s: float = -math.inf
+    barred_until_s: float = -math.inf
 
 
 @dataclass
@@ -255,12 +280,19 @@ class MissionService:
         """MISSION_CURRENT.mission_state as the autopilot reports it."""
         self._commit = commit or (lambda mission, mission_type: None)
         self._set_current = set_current or (lambda seq: True)
-        self._upload: _Upload | None = None
+        self._uploads: dict[int, _Upload] = {}
+        """Open uploads by mission type (a list type: three keys at most)."""
+        self._lapsed: dict[int, _Lapsed] = {}
+        """The last cancelled upload by mission type (a list type: three keys at most)."""
         self._completed: _Completed | None = None
 
     @property
     def uploading(self) -> bool:
-        return self._upload is not None
+        return bool(self._uploads)
+
+    def upload_budget_s(self, count: int) -> float:
+        """How long an upload of ``count`` items may take from its first COUNT (module docstring)."""
+        return count * self.params.mission_upload_timeout_s + self.params.mission_upload_margin_s
 
     def count(self, mission_type: int) -> int:
         """Number of wire items of ``mission_type`` (MISSION counts home)."""
@@ -291,17 +323,25 @@ class MissionService:
         return []  # MISSION_ACK: the end of a download, nothing to do
 
     def tick(self, now_s: float) -> list:
-        """Re-request a missing item, or cancel an upload that stopped making progress."""
-        up = self._upload
-        if up is None:
-            return []
-        if now_s - up.last_progress_s >= self.params.mission_upload_timeout_s:
-            self._upload = None
+        """Cancel the uploads past their deadline or without progress for ``mission_upload_timeout_s``;
+        re-request the missing items of the others. (Only here: the shell reads what arrived first,
+        so a late loop turn does not cancel an upload whose item is waiting in the socket.)"""
+        replies = []
+        for mission_type, up in list(self._uploads.items()):
+            if now_s >= up.deadline_s:
+                lapsed = _Lapsed(up.sender, up.deadline_s, barred_until_s=now_s + self.params.mission_upload_holdoff_s)
+            elif now_s - up.last_progress_s >= self.params.mission_upload_timeout_s:
+                lapsed = _Lapsed(up.sender, up.deadline_s, restart_until_s=now_s + self.params.mission_upload_timeout_s)
+            else:
+                continue
+            del self._uploads[mission_type]
+            self._lapsed[mission_type] = lapsed
             self._completed = None
-            return [self._ack(up.sender, mav.MAV_MISSION_OPERATION_CANCELLED, up.mission_type)]
-        if now_s - up.last_request_s >= self.params.mission_item_retry_s:
-            return [self._request(up, now_s)]
-        return []
+            replies.append(self._ack(up.sender, mav.MAV_MISSION_OPERATION_CANCELLED, mission_type))
+        for up in self._uploads.values():
+            if now_s - up.last_request_s >= self.params.mission_item_retry_s:
+                replies.append(self._request(up, now_s))
+        return replies
 
     # ---------------------------------------------------------------- daemon side
 
@@ -333,26 +373,40 @@ class MissionService:
         up.last_request_s = now_s
         return mav.MAVLink_mission_request_int_message(*up.sender, len(up.received), up.mission_type)
 
-    def _busy_for(self, sender: Sender) -> bool:
-        return self._upload is not None and self._upload.sender != sender
+    def _busy_for(self, sender: Sender, mission_type: int) -> bool:
+        """Whether another sender is uploading ``mission_type`` (any type, for MISSION_TYPE_ALL)."""
+        types = self._uploads if mission_type == MISSION_TYPE_ALL else (mission_type,)
+        return any(t in self._uploads and self._uploads[t].sender != sender for t in types)
 
     def _on_count(self, msg, sender: Sender, now_s: float) -> list:
         mission_type = msg.mission_type
-        if self._busy_for(sender):
-            return [self._ack(sender, mav.MAV_MISSION_DENIED, mission_type)]
-        self._upload = None  # a repeated COUNT from the uploader restarts
-        self._completed = None
         if not is_list_type(mission_type):
             return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, mission_type)]
+        lapsed = self._lapsed.get(mission_type)
+        mine = lapsed is not None and lapsed.sender == sender
+        if self._busy_for(sender, mission_type) or (mine and now_s < lapsed.barred_until_s):
+            return [self._ack(sender, mav.MAV_MISSION_DENIED, mission_type)]
+        # A repeated COUNT from the uploader restarts, as does one just after a no-progress cancel:
+        # either keeps the transaction's deadline.
+        previous = self._uploads.pop(mission_type, None)
+        deadline_s = None
+        if previous is not None:
+            deadline_s = previous.deadline_s
+        elif mine and now_s < lapsed.restart_until_s:
+            deadline_s = lapsed.deadline_s
+        self._completed = None
         if msg.count > self.params.mission_max_items:
             return [self._ack(sender, mav.MAV_MISSION_NO_SPACE, mission_type)]
         if msg.count == 0:
             return [self._finish(sender, mission_type, [], 0)]
-        self._upload = _Upload(sender, mission_type, msg.count, last_progress_s=now_s)
-        return [self._request(self._upload, now_s)]
+        if deadline_s is None:
+            deadline_s = now_s + self.upload_budget_s(msg.count)
+        self._lapsed.pop(mission_type, None)
+        up = self._uploads[mission_type] = _Upload(sender, mission_type, msg.count, deadline_s, last_progress_s=now_s)
+        return [self._request(up, now_s)]
 
     def _on_item(self, msg, sender: Sender, now_s: float) -> list:
-        up = self._upload
+        up = self._uploads.get(msg.mission_type)
         if up is None:
             done = self._completed
             if (
@@ -363,8 +417,6 @@ class MissionService:
             return []
         if up.sender != sender:
             return [self._ack(sender, mav.MAV_MISSION_DENIED, msg.mission_type)]
-        if msg.mission_type != up.mission_type:
-            return []  # a stray item of another list: the pending request stands
         expected = len(up.received)
         if msg.seq < expected:
             return []  # duplicate
@@ -373,13 +425,13 @@ class MissionService:
         item = item_from_message(msg)
         result = check_item(item, up.mission_type, msg.seq)
         if result != mav.MAV_MISSION_ACCEPTED:
-            self._upload = None
+            del self._uploads[up.mission_type]
             return [self._ack(sender, result, up.mission_type)]
         up.received.append(item)
         up.last_progress_s = now_s
         if len(up.received) < up.count:
             return [self._request(up, now_s)]
-        self._upload = None
+        del self._uploads[up.mission_type]
         return [self._finish(sender, up.mission_type, up.received, up.count)]
 
     def _finish(self, sender: Sender, mission_type: int, wire: list[MissionItem], count: int):
@@ -387,7 +439,7 @@ class MissionService:
         new = with_type(self.mission, mission_type, wire)
         result = check_list(new, mission_type)
         if result == mav.MAV_MISSION_ACCEPTED:
-            result = self._store(new, mission_type)
+            result = self._store(new, mission_type) if wire else self._store_if_changed(new, mission_type)
         self._completed = _Completed(sender, mission_type, count, result, wire[-1] if wire else None)
         return self._ack(sender, result, mission_type)
 
@@ -399,6 +451,11 @@ class MissionService:
         self.mission = new
         return mav.MAV_MISSION_ACCEPTED
 
+    def _store_if_changed(self, new: Mission, mission_type: int) -> int:
+        """A clear or an empty upload: committed only if it changes the mission (a list already
+        empty is ACCEPTED with no store write and no re-plan)."""
+        return mav.MAV_MISSION_ACCEPTED if new == self.mission else self._store(new, mission_type)
+
     def _on_request(self, msg, sender: Sender) -> list:
         if not is_list_type(msg.mission_type):
             return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
@@ -409,12 +466,14 @@ class MissionService:
         return [item_message(wire[msg.seq], msg.seq, msg.mission_type, sender, current)]
 
     def _on_clear(self, msg, sender: Sender) -> list:
-        if self._busy_for(sender):
-            return [self._ack(sender, mav.MAV_MISSION_DENIED, msg.mission_type)]
-        if not (is_list_type(msg.mission_type) or msg.mission_type == MISSION_TYPE_ALL):
-            return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, msg.mission_type)]
-        self._upload = None
-        return [self._ack(sender, self._store(cleared(self.mission, msg.mission_type), msg.mission_type), msg.mission_type)]
+        mission_type = msg.mission_type
+        if not (is_list_type(mission_type) or mission_type == MISSION_TYPE_ALL):
+            return [self._ack(sender, mav.MAV_MISSION_UNSUPPORTED, mission_type)]
+        if self._busy_for(sender, mission_type):
+            return [self._ack(sender, mav.MAV_MISSION_DENIED, mission_type)]
+        for t in list(self._uploads) if mission_type == MISSION_TYPE_ALL else (mission_type,):
+            self._uploads.pop(t, None)  # the uploader's own clear ends its upload
+        return [self._ack(sender, self._store_if_changed(cleared(self.mission, mission_type), mission_type), mission_type)]
 
     def request_current(self, seq: int) -> list:
         """A ground station asks to continue at wire seq ``seq`` (MISSION_SET_CURRENT or

@@ -30,6 +30,7 @@ from support import free_port
 
 from rover_ctl.config import GcsParams
 from rover_ctl.mavlink.gcs import DefaultHandlers, GcsLink
+from rover_ctl.mavlink.inbound import DROP_REASONS
 from rover_ctl.mission.store import MissionStore, to_json
 from rover_ctl.mission.validate import validate
 
@@ -127,6 +128,7 @@ def test_arbitrary_messages_of_every_handled_type(tmp_path_factory, messages):
             check_message(h, msg, sender)
         assert h.heartbeats_go_on()
         assert not h.link.inbound.failures, h.link.inbound.failures
+        assert set(h.link.inbound.dropped) <= set(DROP_REASONS), h.link.inbound.dropped  # no key from a frame
     finally:
         h.close()
 
@@ -157,5 +159,6 @@ def test_random_bytes_and_corrupted_frames(tmp_path_factory, seed, datagrams, va
         assert h.store.path.read_bytes() == before
         assert h.heartbeats_go_on()
         assert not h.link.inbound.failures, h.link.inbound.failures
+        assert set(h.link.inbound.dropped) <= set(DROP_REASONS), h.link.inbound.dropped
     finally:
         h.close()

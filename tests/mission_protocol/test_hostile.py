@@ -3,6 +3,7 @@ exception, and the stored plan unchanged (regressions of issue #10 / #9)."""
 
 from __future__ import annotations
 
+import logging
 import math
 
 import pytest
@@ -11,6 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.config import GcsParams
 from rover_ctl.mavlink.gcs import DefaultHandlers
+from rover_ctl.mavlink.inbound import DROP_REASONS, ROVER_MODES, UNKNOWN_MODE, Inbound
 from rover_ctl.mavlink.mission import MissionService, item_message
 from rover_ctl.mission.model import Mission, MissionItem, MissionType
 from rover_ctl.mission.store import MissionStore
@@ -165,8 +167,24 @@ def test_messages_for_another_component_and_unknown_modes_are_dropped_and_counte
         assert not handlers.armed and handlers.custom_mode == RoverMode.MANUAL
         dropped = lt.link.inbound.dropped
         assert dropped["command for another component"] == 1
-        assert dropped["SET_MODE to unknown mode 99"] == 1
+        assert dropped["SET_MODE to an unknown mode"] == 1
         assert dropped["unfinished frame at the end of a datagram"] == 1
+
+
+def test_the_drop_counter_has_one_key_per_reason_whatever_values_come(caplog):
+    """The reason carried the mode number: 100,000 distinct modes were 100,000 keys (11 MB)."""
+    inbound = Inbound(PARAMS)
+    inbound._drop_log.clock = inbound._refusal_log.clock = lambda: 0.0  # all within one log interval
+    caplog.set_level(logging.DEBUG, logger="rover_ctl.mavlink.inbound")
+    unknown = [mode for mode in range(100, 20_100) if mode not in ROVER_MODES]
+    for mode in unknown:
+        assert not inbound.check(from_sender(mav.MAVLink_set_mode_message(1, 1, mode), MAVPROXY)).ok
+        bad = mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, mode + 0.5, 0, 0, 0, 0, 0)
+        assert inbound.check(from_sender(bad, MAVPROXY)).reply is not None  # refused: counted, not keyed
+    assert inbound.dropped == {UNKNOWN_MODE: len(unknown)} and set(inbound.dropped) <= set(DROP_REASONS)
+    assert inbound.refused == len(unknown)
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 2 and "custom_mode 100" in lines[0]  # the value goes to a debug line, rate-limited
 
 
 def test_each_datagram_is_parsed_on_its_own(udp_port):

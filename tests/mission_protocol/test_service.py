@@ -271,3 +271,99 @@ def test_a_cancelled_upload_never_collects_the_previous_uploads_ack(svc, rec, mi
     assert send(svc, item_int(changed[-1], len(changed) - 1)) == []
     assert send(svc, item_int(wire[-1], len(wire) - 1)) == []
     assert len(rec.commits) == 1
+
+
+# ---- strangers on the GCS port: no disk work for nothing, no upload held for ever ----------------
+
+
+def clear_all(mission_type: int):
+    return mav.MAVLink_mission_clear_all_message(1, 1, mission_type)
+
+
+def count(n: int, mission_type: int = 0):
+    return mav.MAVLink_mission_count_message(1, 1, n, mission_type)
+
+
+def test_a_clear_or_empty_upload_of_an_empty_list_is_accepted_without_a_commit(svc, rec, mission):
+    before = svc.mission
+    for mission_type in (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY, 255):
+        ack = one(send(svc, clear_all(mission_type)), "MISSION_ACK")
+        assert ack.type == mav.MAV_MISSION_ACCEPTED and ack.mission_type == mission_type
+    assert one(send(svc, count(0, MissionType.RALLY)), "MISSION_ACK").type == mav.MAV_MISSION_ACCEPTED
+    assert rec.commits == [] and svc.mission is before  # the link tells the daemon nothing: no re-plan
+    svc.mission = mission
+    for _ in range(3):
+        assert one(send(svc, clear_all(MissionType.FENCE)), "MISSION_ACK").type == mav.MAV_MISSION_ACCEPTED
+        assert one(send(svc, clear_all(255)), "MISSION_ACK").type == mav.MAV_MISSION_ACCEPTED
+    assert [t for _, t in rec.commits] == [MissionType.FENCE, 255]  # only the clears that changed something
+    assert svc.mission.items == svc.mission.fence == svc.mission.rally == [] and svc.mission.home == mission.home
+
+
+def test_repeated_counts_cannot_hold_an_upload_past_its_deadline(svc, rec, mission):
+    deadline = svc.upload_budget_s(3)
+    assert deadline == 3 * PARAMS.mission_upload_timeout_s + PARAMS.mission_upload_margin_s
+    t = 0.0
+    one(send(svc, count(3), MAVSDK, t), "MISSION_REQUEST_INT")  # a stranger starts an upload ...
+    while t + 1.0 < deadline:
+        t += 1.0
+        assert one(send(svc, count(3), MAVSDK, t), "MISSION_REQUEST_INT").seq == 0  # ... and restarts it every second
+        for msg in (clear_all(MissionType.MISSION), count(2)):
+            assert one(send(svc, msg, MAVPROXY, t), "MISSION_ACK").type == mav.MAV_MISSION_DENIED
+        assert svc.tick(t) == []
+    cancelled = one(svc.tick(deadline), "MISSION_ACK")  # the restarts did not extend it
+    assert cancelled.type == mav.MAV_MISSION_OPERATION_CANCELLED and cancelled.target_system == MAVSDK[0]
+    assert not svc.uploading
+    t = deadline + 0.1
+    assert one(send(svc, count(3), MAVSDK, t), "MISSION_ACK").type == mav.MAV_MISSION_DENIED  # held off ...
+    assert upload(svc, wire_items(mission, MissionType.MISSION), now_s=t).type == mav.MAV_MISSION_ACCEPTED  # ... the GCS gets in
+    assert len(rec.commits) == 1
+    later = t + PARAMS.mission_upload_holdoff_s
+    assert one(send(svc, count(3), MAVSDK, later), "MISSION_REQUEST_INT")  # a hold-off, not a ban
+
+
+def test_a_restart_past_the_deadline_does_not_revive_the_upload(svc):
+    one(send(svc, count(2), MAVSDK, 0.0), "MISSION_REQUEST_INT")
+    t = svc.upload_budget_s(2)
+    send(svc, count(2), MAVSDK, t - 1.0)
+    send(svc, count(2), MAVSDK, t)  # arrives with the deadline, before the loop's tick ...
+    cancelled = one(svc.tick(t), "MISSION_ACK")  # ... which cancels it all the same
+    assert cancelled.type == mav.MAV_MISSION_OPERATION_CANCELLED and not svc.uploading
+    assert one(send(svc, count(2), MAVPROXY, t), "MISSION_REQUEST_INT").target_system == MAVPROXY[0]
+
+
+def test_a_count_just_after_a_no_progress_cancel_is_a_restart_and_keeps_the_deadline(svc):
+    deadline = svc.upload_budget_s(2)
+    t = 0.0
+    one(send(svc, count(2), MAVSDK, t), "MISSION_REQUEST_INT")
+    while t + PARAMS.mission_upload_timeout_s < deadline:
+        t += PARAMS.mission_upload_timeout_s  # no progress: cancelled ...
+        assert one(svc.tick(t), "MISSION_ACK").type == mav.MAV_MISSION_OPERATION_CANCELLED
+        t += 0.1  # ... and at once started again
+        one(send(svc, count(2), MAVSDK, t), "MISSION_REQUEST_INT")
+    assert one(svc.tick(deadline), "MISSION_ACK").type == mav.MAV_MISSION_OPERATION_CANCELLED  # progress < timeout ago
+    assert one(send(svc, count(2), MAVSDK, deadline + 0.1), "MISSION_ACK").type == mav.MAV_MISSION_DENIED
+
+
+def test_a_slow_upload_that_keeps_progressing_ends_within_its_deadline(svc, rec, mission):
+    wire = wire_items(mission, MissionType.MISSION)
+    t, step = 0.0, PARAMS.mission_upload_timeout_s - 0.01  # each item just before the no-progress timeout
+    one(send(svc, count(len(wire)), MAVPROXY, t), "MISSION_REQUEST_INT")
+    for seq, item in enumerate(wire):
+        t += step
+        assert all(r.get_type() == "MISSION_REQUEST_INT" for r in svc.tick(t))
+        reply = send(svc, item_int(item, seq), MAVPROXY, t)[0]
+    assert reply.type == mav.MAV_MISSION_ACCEPTED and len(rec.commits) == 1
+
+
+def test_each_mission_type_is_its_own_transaction(svc, mission):
+    wire = wire_items(mission, MissionType.MISSION)
+    one(send(svc, count(len(wire)), MAVSDK), "MISSION_REQUEST_INT")  # one sender uploads the mission ...
+    fence = wire_items(mission, MissionType.FENCE)
+    assert upload(svc, fence, MissionType.FENCE).type == mav.MAV_MISSION_ACCEPTED  # ... another a fence meanwhile
+    assert one(send(svc, clear_all(MissionType.RALLY)), "MISSION_ACK").type == mav.MAV_MISSION_ACCEPTED
+    for intruder in (count(3), clear_all(MissionType.MISSION), clear_all(255), item_int(wire[0], 0)):
+        assert one(send(svc, intruder), "MISSION_ACK").type == mav.MAV_MISSION_DENIED
+    for seq, item in enumerate(wire):
+        reply = send(svc, item_int(item, seq), MAVSDK)[0]
+    assert reply.type == mav.MAV_MISSION_ACCEPTED
+    assert len(svc.mission.items) == len(mission.items) and len(svc.mission.fence) == len(mission.fence)

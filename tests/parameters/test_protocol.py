@@ -6,9 +6,9 @@ import pytest
 from mission_protocol.helpers import LinkThread, expect, gcs
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from rover_ctl.config import Config, GcsParams
+from rover_ctl.config import Config, GcsParams, load_config
 from rover_ctl.mavlink.gcs import DefaultHandlers
-from rover_ctl.mavlink.params import LIST_BURST, ParamService
+from rover_ctl.mavlink.params import LIST_BURST, ConfigParams, ParamService
 from rover_ctl.parameters import BY_NAME, MAVLINK, values
 
 FAST = GcsParams(heartbeat_period_s=0.2, param_send_rate_hz=1000.0)
@@ -114,3 +114,34 @@ def test_a_list_goes_out_at_the_configured_pace():
     service.handle(mav.MAVLink_param_request_list_message(1, 1))  # a new request starts over
     service.tick(500.0)
     assert conn.sent[-1][0].decode() == MAVLINK[LIST_BURST - 1].name
+
+
+def test_a_request_while_the_list_goes_out_does_not_start_it_over():
+    """A stream of PARAM_REQUEST_LIST (one per loop turn) used to restart the list every time, so
+    no ground station's fetch ever finished."""
+    conn, handlers = Recorder(), DefaultHandlers()
+    service = ParamService(conn, handlers, rate_hz=lambda: 20.0)
+    request = mav.MAVLink_param_request_list_message(1, 1)
+    service.handle(request)
+    now_s = 100.0
+    for _ in range(10 * len(MAVLINK)):
+        service.tick(now_s)
+        if not service.listing:
+            break
+        service.handle(request)
+        now_s += 0.05
+    assert [s[0].decode() for s in conn.sent] == [p.name for p in MAVLINK]  # each once, in order: it finished
+
+
+def test_alternating_sets_are_answered_at_once_and_written_once_per_interval(tmp_path):
+    config = load_config(None, [f"gcs.mission_store_path={tmp_path / 'state' / 'mission.json'}"])
+    handlers = DefaultHandlers(config)
+    handlers.table = ConfigParams.persistent(config, clock=lambda: 0.0)  # what the daemon does
+    conn = Recorder()
+    service = ParamService(conn, handlers)
+    for k in range(100):
+        value = 0.5 if k % 2 else 0.8
+        service.handle(mav.MAVLink_param_set_message(1, 1, b"WP_SPEED", value, mav.MAV_PARAM_TYPE_REAL32))
+        name, echoed = conn.sent[-1][:2]
+        assert name == b"WP_SPEED" and echoed == pytest.approx(value)  # the answer carries the new value
+    assert handlers.table.writes == 1 and handlers.table.unsaved

@@ -23,6 +23,7 @@ def test_a_set_persists_across_a_restart(tmp_path):
     assert table.set_param("WP_SPEED", 0.8) == (True, "")
     assert table.set_param("FS_ACTION", 2) == (True, "")
     assert table.set_param("WP_RADIUS", 500.0)[0] is False  # refused: not stored
+    table.close()  # the daemon's shutdown: writes what the last gcs.param_save_s set
     stored = tmp_path / "state" / "params.parm"
     assert stored.read_text().splitlines()[1:] == ["WP_SPEED         0.8", "FS_ACTION        2"]
     restarted = config_in(tmp_path)
@@ -65,7 +66,8 @@ def test_a_corrupt_store_is_moved_aside_with_one_line(tmp_path, text, caplog):
 
 
 def test_a_failed_write_keeps_the_old_file_and_says_so(tmp_path, monkeypatch):
-    table = ConfigParams.persistent(config_in(tmp_path))
+    now = [0.0]
+    table = ConfigParams.persistent(config_in(tmp_path), clock=lambda: now[0])
     assert table.set_param("WP_SPEED", 0.8) == (True, "")
     before = (tmp_path / "state" / "params.parm").read_text()
 
@@ -73,6 +75,7 @@ def test_a_failed_write_keeps_the_old_file_and_says_so(tmp_path, monkeypatch):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", no_space)
+    now[0] += table.config.gcs.param_save_s  # a write is due: the set writes at once
     assert table.set_param("WP_SPEED", 0.9) == (True, "WP_SPEED set but not saved")
     assert table.config.executor.cruise_speed_mps == 0.9  # in force for this run
     assert (tmp_path / "state" / "params.parm").read_text() == before
@@ -96,3 +99,61 @@ def test_rover_ctl_params_leaves_a_corrupt_store_where_it_is(tmp_path, capsys):
     assert main(["params", "import", str(parm), *store_flag]) == 2
     capsys.readouterr()
     assert stored.read_text() == "WP_SPEED 999\n" and sorted(p.name for p in stored.parent.iterdir()) == ["params.parm"]
+
+
+def test_writes_are_coalesced_while_every_value_is_in_force_at_once(tmp_path):
+    """A stream of PARAM_SETs (here 100 alternating values) is one write per gcs.param_save_s,
+    the first at once; the last value is written when the interval has passed."""
+    now = [0.0]
+    table = ConfigParams.persistent(config_in(tmp_path), clock=lambda: now[0])
+    stored = tmp_path / "state" / "params.parm"
+    for k in range(100):
+        value = 0.5 if k % 2 else 0.8
+        assert table.set_param("WP_SPEED", value) == (True, "")
+        assert table.config.executor.cruise_speed_mps == value  # in force at once
+        now[0] += 0.001
+    assert table.writes == 1 and table.unsaved and "WP_SPEED         0.8" in stored.read_text()
+    table.flush()  # the daemon's loop turn, still within the interval: nothing
+    assert table.writes == 1
+    now[0] += table.config.gcs.param_save_s
+    table.flush()
+    assert table.writes == 2 and not table.unsaved
+    restarted = config_in(tmp_path)
+    ConfigParams.persistent(restarted)  # a crash now would lose nothing
+    assert restarted.executor.cruise_speed_mps == 0.5
+    table.close()
+    assert table.writes == 2  # nothing left to write
+
+
+def test_shutdown_writes_what_the_interval_held_back(tmp_path):
+    table = ConfigParams.persistent(config_in(tmp_path), clock=lambda: 0.0)
+    table.set_param("WP_SPEED", 0.8)
+    table.set_param("WP_SPEED", 0.6)
+    assert table.unsaved
+    table.close()
+    restarted = config_in(tmp_path)
+    ConfigParams.persistent(restarted)
+    assert restarted.executor.cruise_speed_mps == 0.6
+
+
+def test_a_deferred_write_that_fails_is_logged_and_tried_again(tmp_path, monkeypatch, caplog):
+    now = [0.0]
+    table = ConfigParams.persistent(config_in(tmp_path), clock=lambda: now[0])
+    table.set_param("WP_SPEED", 0.8)
+    table.set_param("WP_SPEED", 0.9)  # held back
+    stored = tmp_path / "state" / "params.parm"
+    before = stored.read_text()
+
+    def no_space(*args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", no_space)
+    now[0] += table.config.gcs.param_save_s
+    table.flush()
+    assert "cannot save parameters" in caplog.text and table.unsaved and stored.read_text() == before
+    monkeypatch.undo()
+    table.flush()  # not before another interval
+    assert stored.read_text() == before
+    now[0] += table.config.gcs.param_save_s
+    table.flush()
+    assert not table.unsaved and "WP_SPEED         0.9" in stored.read_text()
