@@ -430,8 +430,9 @@ class DaemonParams:
     events.jsonl) and the ``latest`` link to it; empty: no logs."""
     log_max_total_mb: float = 1000.0
     """Budget of all run folders together: at each start the oldest are removed (never the new
-    one) until the rest fit; 0 = no limit. A lockstep run of cmac_loop (155 s of sim time) writes
-    about 4 MB."""
+    one) until the rest fit; during a run the tlogs stop (one warning, a log_budget event) once
+    the run's own folder exceeds it; 0 = no limit. A lockstep run of cmac_loop (155 s of sim time)
+    writes about 4 MB."""
     link_chatter_s: float = 60.0
     """pymavlink's reconnect messages: each distinct line is logged at most once per this (wall
     clock), with a count of the repeats."""
