@@ -309,6 +309,13 @@ class GcsParams:
     resends its COUNT every 1.5 s) gets its turn."""
     max_messages_per_poll: int = 100
     """GCS link: messages read per loop turn at most, so a flood cannot starve the control loop."""
+    max_peers: int = 8
+    """A GCS link listening on UDP (udpin) sends to this many ground stations at most: an address
+    becomes one when a frame from it passes signing (with a key) and the gate; a newcomer beyond
+    this replaces the one silent longest."""
+    peer_timeout_s: float = 10.0
+    """A ground station on a udpin GCS link that has sent nothing that passed for this long is sent
+    nothing more until it speaks again (ground stations send a HEARTBEAT every second)."""
     mission_store_path: str = "~/.local/state/rover-ctl/mission.json"
     """Where the current mission, fence and rally are persisted; empty = not persisted."""
     position_rate_hz: float = 4.0
@@ -437,8 +444,9 @@ class DaemonParams:
     events.jsonl) and the ``latest`` link to it; empty: no logs."""
     log_max_total_mb: float = 1000.0
     """Budget of all run folders together: at each start the oldest are removed (never the new
-    one) until the rest fit; 0 = no limit. A lockstep run of cmac_loop (155 s of sim time) writes
-    about 4 MB."""
+    one) until the rest fit; during a run the tlogs stop (one warning, a log_budget event) once
+    the run's own folder exceeds it; 0 = no limit. A lockstep run of cmac_loop (155 s of sim time)
+    writes about 4 MB."""
     link_chatter_s: float = 60.0
     """pymavlink's reconnect messages: each distinct line is logged at most once per this (wall
     clock), with a count of the repeats."""

@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rover_ctl.app.logs import CsvLog, LogClock, TlogWriter
+from rover_ctl.app.logs import CsvLog, LogBudget, LogClock, TlogWriter
 from rover_ctl.autopilot.autopilot import LOG_COLUMNS, RELEASE, Autopilot, Readings, StepOutput
 from rover_ctl.autopilot.events import ArmRequest, Event, ItemReached, MissionCurrent, StatusText
 from rover_ctl.autopilot.loop_rate import ControlTicks
@@ -123,6 +123,7 @@ class Daemon:
         self.events = EventLog(None)
         self.csv: CsvLog | None = None
         self.tlogs: list[TlogWriter] = []
+        self.log_budget: LogBudget | None = None
         self._saved_seq: int | None = None
         self.log_clock = LogClock(lambda: self.link.vehicle_time_s if self.lockstep else None)
         self.stream_plan: StreamPlan | None = None
@@ -153,6 +154,7 @@ class Daemon:
             self.log_dir.mkdir(parents=True, exist_ok=True)
             self.events = EventLog(self.log_dir / "events.jsonl")
             self.csv = CsvLog(self.log_dir / "control.csv", CSV_COLUMNS)
+            self.log_budget = LogBudget(self.log_dir, self.settings.log_max_total_mb, on_full=self._log_budget_full)
         url = cfg.link.vehicle_url
         if budget.is_serial(url) and budget.serial_baud(url) is None:
             log.warning("vehicle link %s: no baud rate given, opened at pymavlink's %d; a radio at another rate "
@@ -164,7 +166,7 @@ class Daemon:
             command_retries=self.settings.command_retries,
         )
         if self.log_dir:
-            self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog", clock=self.log_clock))
+            self.tlogs.append(TlogWriter(self.log_dir / "vehicle.tlog", clock=self.log_clock, budget=self.log_budget))
             self.tlogs[-1].attach(self.link.conn)
         log.info("vehicle link %s: waiting for a heartbeat", cfg.link.vehicle_url)
         self.vehicle = self.link.wait_vehicle(self.settings.vehicle_wait_s, cancelled=lambda: self._stop)
@@ -185,10 +187,14 @@ class Daemon:
             self.autopilot.resume_from(seq)
         self._apply(self.autopilot.drain())
         if self.log_dir:
-            self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog", clock=self.log_clock))
+            self.tlogs.append(TlogWriter(self.log_dir / "gcs.tlog", clock=self.log_clock, budget=self.log_budget))
             self.tlogs[-1].attach(self.gcs.conn)
         log.info("GCS link %s ready", cfg.link.gcs_url)
         return True
+
+    def _log_budget_full(self, size_bytes: int) -> None:
+        """This run's folder outgrew ``daemon.log_max_total_mb``: the tlogs stopped (``LogBudget`` warned)."""
+        self.events.write(self._now(), "log_budget", size_mb=round(size_bytes / 1e6, 1), max_mb=self.settings.log_max_total_mb)
 
     def _rangefinder_count(self) -> int:
         """DISTANCE_SENSOR per period the vehicle will send: the reporting ones once the autopilot

@@ -4,12 +4,15 @@ and pymavlink's console chatter kept out of the way.
 Run folders, as ArduPilot numbers its logs: each start of the daemon writes into a new folder
 ``LOG_DIR/00000012/`` (one more than the highest there), ``LOG_DIR/latest`` is a symlink to it,
 and the oldest run folders are removed while all of them together exceed a size budget (never
-the new one). An earlier run is never overwritten.
+the new one). An earlier run is never overwritten. During the run the tlogs stop writing, with
+one warning, once the run's own folder exceeds that budget (``LogBudget``): a flood of frames on
+the GCS link cannot fill the disk.
 
 The .tlog is pymavlink's format, read by ``mavlogdump.py``, MAVExplorer and
 ``mavutil.mavlink_connection("run.tlog")``: each record is an 8-byte big-endian timestamp in
 microseconds followed by the raw MAVLink frame. Both directions are logged: received frames
-through the connection's message hook, sent frames through the MAVLink object's send callback.
+through the connection's message hook (the GCS link runs it only for frames that passed its
+signature check and gate), sent frames through the MAVLink object's send callback.
 pymavlink's own ``mavfile.setup_logfile`` does not fit: it stamps the wall clock and logs only
 what ``recv_msg`` returns (the vehicle link parses whole buffers, and sent frames are missed).
 The timestamps come from a ``LogClock``: vehicle time in a lockstep run, so a log replays with the
@@ -36,6 +39,11 @@ LATEST = "latest"
 """The symlink to the newest run folder."""
 TLOG_STAMP = struct.Struct(">Q")
 """A .tlog record's timestamp: microseconds, big-endian, before the frame."""
+MEASURE_EVERY_BYTES = 1_000_000
+"""``LogBudget`` measures the run folder again after the tlogs wrote this much (the control CSV
+and the event log grow meanwhile too); a measurement is a few ``lstat`` calls."""
+
+log = logging.getLogger(__name__)
 
 
 class LogDirError(RuntimeError):
@@ -160,15 +168,83 @@ class LogClock:
         return self._last_s
 
 
-class TlogWriter:
-    """Appends every frame seen on one or more pymavlink connections to a .tlog file."""
+class LogBudget:
+    """``daemon.log_max_total_mb`` during a run: once the run's folder holds more than that, the
+    tlogs sharing this budget stop writing (``full``), with one warning and one call of
+    ``on_full(size_bytes)`` (the daemon writes a ``log_budget`` event). 0: no limit. The size is
+    what the tlogs wrote, counted as they write it, plus the rest of the folder (the control CSV,
+    the event log) as measured at the start and after every ``MEASURE_EVERY_BYTES`` of tlog."""
 
-    def __init__(self, path: str | Path, clock: Callable[[], float] = time.time):
+    def __init__(self, folder: str | Path, max_total_mb: float, on_full: Callable[[int], Any] | None = None,
+                 measure_every_bytes: int = MEASURE_EVERY_BYTES) -> None:  # fmt: skip
+        self.folder = Path(folder)
+        self.max_total_mb = max_total_mb
+        self.on_full = on_full
+        self.measure_every_bytes = measure_every_bytes
+        self.full = False
+        self._tlogs: list[Path] = []
+        self._tlog_bytes = 0
+        """What the tlogs wrote (in their files' buffers or on disk)."""
+        self._others = 0
+        """The rest of the folder when last measured."""
+        self._unmeasured = 0
+        """Tlog bytes since that measurement."""
+        self._measure()
+
+    def track(self, path: str | Path) -> None:
+        """A tlog (a new, empty file in the folder) whose writes this budget counts."""
+        self._tlogs.append(Path(path))
+
+    @property
+    def size_bytes(self) -> int:
+        return self._others + self._tlog_bytes
+
+    def _measure(self) -> None:
+        if self.max_total_mb <= 0:
+            return
+        on_disk = 0
+        for path in self._tlogs:
+            with contextlib.suppress(OSError):
+                on_disk += os.lstat(path).st_size
+        self._others = max(folder_size_bytes(self.folder) - on_disk, 0)
+        self._unmeasured = 0
+
+    def allow(self, n_bytes: int) -> bool:
+        """Whether a tlog may write ``n_bytes`` more (counted as written if so)."""
+        if self.full:
+            return False
+        if self.max_total_mb <= 0:
+            return True
+        self._unmeasured += n_bytes
+        if self._unmeasured >= self.measure_every_bytes:
+            self._measure()
+        if self.size_bytes + n_bytes <= self.max_total_mb * 1e6:
+            self._tlog_bytes += n_bytes
+            return True
+        self.full = True
+        log.warning("logs: %s holds more than the log budget (daemon.log_max_total_mb, LOG_MAX_MB: %g MB): "
+                    "the tlogs stop here for this run", self.folder, self.max_total_mb)  # fmt: skip
+        if self.on_full is not None:
+            self.on_full(self.size_bytes + n_bytes)
+        return False
+
+
+class TlogWriter:
+    """Appends every frame seen on one or more pymavlink connections to a .tlog file, while the
+    run's ``LogBudget`` allows; a write that fails (a full disk) stops it, with one warning."""
+
+    def __init__(self, path: str | Path, clock: Callable[[], float] = time.time, budget: LogBudget | None = None):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")
         self._clock = clock
+        self.budget = budget
+        if budget is not None:
+            budget.track(self.path)
         self.frames = 0
+        self.unwritten = 0
+        """Frames not written: over the budget, or after a failed write."""
+        self.failed: str | None = None
 
     def attach(self, conn: Any) -> None:
         """Log what ``conn`` (a ``mavutil.mavfile``) receives and sends from now on."""
@@ -181,8 +257,17 @@ class TlogWriter:
         buf = msg.get_msgbuf()
         if not buf:
             return
-        # pymavlink's readers expect the low two bits clear (they mark other record kinds).
-        self._file.write(TLOG_STAMP.pack(int(self._clock() * 1e6) & ~3) + buf)
+        if self.failed is not None or (self.budget is not None and not self.budget.allow(TLOG_STAMP.size + len(buf))):
+            self.unwritten += 1
+            return
+        try:
+            # pymavlink's readers expect the low two bits clear (they mark other record kinds).
+            self._file.write(TLOG_STAMP.pack(int(self._clock() * 1e6) & ~3) + buf)
+        except OSError as exc:  # the disk is full: the link goes on without its tlog
+            self.failed = str(exc)
+            self.unwritten += 1
+            log.warning("logs: %s: %s; not written from here on", self.path, exc)
+            return
         self.frames += 1
 
     def close(self) -> None:

@@ -15,9 +15,9 @@ sends it; lockstep runs faster than that clock, and the daemon calls a heartbeat
 is late in both vehicle and wall time.
 
 Ports are chosen free on 127.0.0.1: the vehicle link is TCP (the daemon connects to the
-emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: pymavlink serves
-every peer that has spoken, so a second ground station such as MAVProxy can attach to a running
-sim), the watcher UDP.
+emulator's ``tcpin``), the GCS link UDP with the daemon listening (``udpin``: it serves each
+ground station that has spoken, up to ``gcs.max_peers``, so a second one such as MAVProxy can
+attach to a running sim), the watcher UDP.
 
 ``SimOptions.out`` is this run's folder: the daemon writes its logs into it as they are (the
 ``rover-ctl sim`` command line makes it a new numbered run folder under ``--out``), and the report

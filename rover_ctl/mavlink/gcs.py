@@ -32,6 +32,20 @@ The daemon plugs in through ``AutopilotHandlers`` (a Protocol; every MAV_RESULT 
 
 A refusal's reason is the handler's to say (a STATUSTEXT before the ACK, as ArduPilot does).
 
+What a stranger's datagrams can cost is bounded (docs/gcs.md, "The gate"):
+
+* frames are read without pymavlink's ``post_message``: its bookkeeping keeps a table per source
+  system and message type, a new entry per instance value (a NAMED_VALUE_FLOAT ``name``, a
+  PARAM_VALUE ``param_id``), all before any check; with a new name in each frame it grew the
+  daemon by 350 MB in 13 s. Nothing here reads it (``conn.messages``, ``target_system``, the loss
+  counters): each microservice keeps its own bounded state;
+* the connection's message hooks (the tlog, SETUP_SIGNING) run for the frames that passed the
+  signature check and the gate (``rover_ctl.mavlink.inbound``), after it; a refused frame is
+  counted there (``inbound.dropped``, ``inbound.refused``, ``signing.rejected``), not logged;
+* on ``udpin`` the daemon sends to the ground stations in its own peer table
+  (``rover_ctl.mavlink.peers``: those whose frames passed, at most ``GcsParams.max_peers``,
+  forgotten after ``peer_timeout_s`` of silence), not to every address pymavlink ever heard from.
+
 GUIDED destinations arrive as MAV_CMD_DO_REPOSITION (COMMAND_INT, as QGroundControl's "go to
 location" and MAVProxy's ``guided LAT LON ALT`` send it, or COMMAND_LONG; its CHANGE_MODE flag
 switches to GUIDED), as SET_POSITION_TARGET_GLOBAL_INT (only in GUIDED, no answer), or as a
@@ -58,6 +72,7 @@ from rover_ctl.mavlink.commands import CommandService
 from rover_ctl.mavlink.inbound import Inbound
 from rover_ctl.mavlink.mission import MissionService, item_from_message
 from rover_ctl.mavlink.params import ConfigParams, ParamService
+from rover_ctl.mavlink.peers import UdpPeers, serves_many
 from rover_ctl.mavlink.signing import KeyStore, LinkSigning
 from rover_ctl.mavlink.telemetry import Telemetry
 from rover_ctl.mission.model import Home, Mission
@@ -188,6 +203,8 @@ class GcsLink:
             autoreconnect=True,
         )
         self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        self.peers = UdpPeers(self.conn, self.params) if serves_many(self.conn) else None
+        """The ground stations sent to on udpin (before ``Inbound``, which frames its reads)."""
         self.signing = LinkSigning(self.conn, signing, self.params, notify=lambda text, severity: self.send_statustext(text, severity))
         """MAVLink 2 signing (rover_ctl.mavlink.signing): with a key in ``signing`` unsigned frames are dropped."""
         self.inbound = Inbound(self.params, self.conn)
@@ -213,13 +230,15 @@ class GcsLink:
         self.service.mission_state = state.mission_state
         for _ in range(self.params.max_messages_per_poll):  # a flood must not starve the control loop
             try:
-                msg = self.conn.recv_msg()
+                msg = self._receive()
             except OSError as exc:  # a socket error (ICMP-reported, reset): the next turn tries again
                 log.debug("GCS link receive: %s", exc)
                 break
             if msg is None:
                 break
             self._dispatch(msg, now_s)
+        if self.peers is not None:
+            self.peers.expire(now_s)
         self._send_all(self.service.tick(now_s))
         self.param_service.tick(now_s)
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
@@ -228,18 +247,49 @@ class GcsLink:
         if self.telemetry.rates.due(mav.MAVLINK_MSG_ID_MISSION_CURRENT, now_s):
             self.conn.mav.send(self.service.mission_current())
 
+    def _receive(self):
+        """The next frame (None when nothing is waiting), as pymavlink's ``recv_msg`` reads it but
+        without its ``post_message`` (see the module docstring); a frame that fails its signature
+        is a BAD_DATA here, as there."""
+        conn = self.conn
+        while True:
+            data = conn.recv(conn.mav.bytes_needed())
+            if data and conn.first_byte:
+                conn.auto_mavlink_version(data)
+            msg = conn.mav.parse_char(data)
+            if msg is not None or not data:
+                return msg
+
     def _dispatch(self, msg, now_s: float) -> None:
-        """Check ``msg`` at the gate (``rover_ctl.mavlink.inbound``), then hand it to its
-        microservice; a handler that raises anyway is logged and counted there, and the link goes on."""
+        """Check ``msg`` at the gate (``rover_ctl.mavlink.inbound``); if it passes, admit its sender
+        as a peer (udpin; with a key only if it is signed), run the message hooks (the tlog) and hand
+        it to its microservice. A handler that raises anyway is logged and counted there, and the
+        link goes on."""
         verdict = self.inbound.check(msg)
         if not verdict.ok:
             if verdict.reply is not None:
-                self.conn.mav.send(verdict.reply)
+                self._answer_refusal(verdict.reply)
             return
-        try:
-            self._route(msg, now_s)
-        except Exception as exc:  # the link edge: one bad message never stops the daemon
-            self.inbound.failed(msg, exc)
+        if self.peers is not None and (msg.get_signed() or not self.signing.enabled):
+            self.peers.admit(now_s)
+        for step in (self._run_hooks, self._route):
+            try:
+                step(msg, now_s)
+            except Exception as exc:  # the link edge: one bad message never stops the daemon
+                self.inbound.failed(msg, exc)
+
+    def _run_hooks(self, msg, now_s: float) -> None:
+        for hook in self.conn.message_hooks:
+            hook(self.conn, msg)
+
+    def _answer_refusal(self, reply) -> None:
+        """The protocol's refusal goes to whoever asked: on udpin to the sender's address alone
+        (a sender whose first frame was refused is no peer, and the other peers did not ask)."""
+        if self.peers is None:
+            self.conn.mav.send(reply)
+            return
+        with self.peers.only(self.peers.source):
+            self.conn.mav.send(reply)
 
     def _route(self, msg, now_s: float) -> None:
         kind = msg.get_type()

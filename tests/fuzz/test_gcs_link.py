@@ -34,7 +34,8 @@ from rover_ctl.mavlink.inbound import DROP_REASONS
 from rover_ctl.mission.store import MissionStore, to_json
 from rover_ctl.mission.validate import validate
 
-PARAMS = GcsParams(heartbeat_period_s=1.0, mission_store_path="")
+PARAMS = GcsParams(heartbeat_period_s=1.0, mission_store_path="", peer_timeout_s=3600.0)
+"""(The harness's clock jumps by 10 s to make a heartbeat due: its ground station must not expire.)"""
 STORED = json.dumps(to_json(sample_mission()), indent=1).encode()
 """The store file each example starts with (written without the store's fsyncs: speed)."""
 EFFECTS = ("arm", "set_mode", "mission_start", "return_to_launch", "set_current", "set_param", "mission_changed")
@@ -70,6 +71,10 @@ class Harness:
         self.now_s = 0.0
         self.parser = mav.MAVLink(None)
         self.parser.robust_parsing = True
+        # A ground station first (udpin sends only to senders of frames that passed): what follows
+        # must not cut it off.
+        self.send(pack(mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3), (255, 190)))
+        assert len(self.link.peers) == 1
 
     def close(self) -> None:
         self.link.close()

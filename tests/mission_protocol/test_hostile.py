@@ -112,6 +112,7 @@ def test_a_non_finite_command_param_is_denied_and_the_link_goes_on(udp_port, com
     handlers = DefaultHandlers()
     with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=PARAMS, handlers=handlers):
         conn = gcs(udp_port)
+        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # a ground station: sent to
         params = [1.0, float(4), 0.0, 0.0, 0.0, 0.0, 0.0]
         params[slot] = value
         conn.mav.command_long_send(1, 1, command, 0, *params)

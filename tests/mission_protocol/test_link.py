@@ -207,8 +207,11 @@ def connected(url: str, udp_port: int):
     conn = gcs(udp_port)
     conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
     end = time.monotonic() + 3.0
-    while link.conn.recv_msg() is None:
+    while not link.peers:  # a frame that passed makes its sender a peer (rover_ctl.mavlink.peers)
         assert time.monotonic() < end, "the link never heard the ground station"
+        link.poll(time.monotonic())
+    while conn.recv_match(blocking=True, timeout=0.2) is not None:  # what that poll sent (HEARTBEAT, MISSION_CURRENT)
+        pass
     return link, conn
 
 

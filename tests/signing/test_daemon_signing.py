@@ -1,6 +1,6 @@
 """Signing against a real daemon (``rover-ctl run`` with a key, the emulator behind it, lockstep):
-MAVProxy without the key and a ground station with another key change nothing; MAVProxy after
-``signing setup PASSPHRASE`` uploads a mission, arms and starts it."""
+MAVProxy without the key and a ground station with another key change nothing (and the first
+is sent nothing); MAVProxy after ``signing setup PASSPHRASE`` uploads a mission, arms and starts it."""
 
 from __future__ import annotations
 
@@ -48,14 +48,17 @@ def test_only_a_ground_station_with_the_key_changes_anything(tmp_path):
         assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=20.0)
         before = _stored(run)
 
-        # MAVProxy without the key: it sees the (signed) vehicle, but nothing it sends is taken.
+        # MAVProxy without the key: nothing it sends is taken, and it is sent nothing (on udpin the
+        # daemon sends only to ground stations whose frames passed the signature check).
         stranger = _mavproxy(run, tmp_path / "stranger")
         try:
-            stranger.wait_for("Detected vehicle 1:1", timeout_s=20.0)
+            stranger.wait_for("Telemetry log", timeout_s=20.0)
             stranger.send(f"wp load {JUMP}")
             stranger.send("arm throttle")
             stranger.send("mode AUTO")
             assert run.wait_for(lambda p: p.armed or p.mode != RoverMode.HOLD, wall_timeout_s=NEGATIVE_WAIT_S) is False
+            with pytest.raises(AssertionError, match="never printed"):
+                stranger.wait_for("Detected vehicle", timeout_s=1.0)
         finally:
             stranger.close()
 
@@ -77,9 +80,9 @@ def test_only_a_ground_station_with_the_key_changes_anything(tmp_path):
         owner = _mavproxy(run, tmp_path / "owner")
         try:
             owner.send("module load signing")
-            owner.wait_for("Detected vehicle 1:1", timeout_s=20.0)
-            owner.send(f"signing setup {PASSPHRASE}")
+            owner.send(f"signing setup {PASSPHRASE}")  # the daemon answers signed frames only
             owner.wait_for("Setup signing key")
+            owner.wait_for("Detected vehicle 1:1", timeout_s=20.0)
             owner.send(f"wp load {JUMP}")
             owner.wait_for("TYPE_MISSION: ACCEPTED", timeout_s=20.0)
             owner.send("arm throttle")
