@@ -288,6 +288,11 @@ class GcsParams:
     """Our MAVLink system id towards ground stations (SYSID_THISMAV)."""
     component_id: int = 1
     """MAV_COMP_ID_AUTOPILOT1."""
+    ground_station_system_id: int = 255
+    """The system id whose HEARTBEAT keeps the GCS-loss failsafe off (ArduPilot's MAV_GCS_SYSID,
+    SYSID_MYGCS before Rover 4.7): a heartbeat from anyone else, a stranger on an unsigned link
+    included, does not hide a lost ground station. 255 is QGroundControl's and MAVProxy's; MAVSDK
+    uses 245. 0: any ground station's heartbeat counts."""
     heartbeat_period_s: float = 1.0
     """Our HEARTBEAT period on the GCS link."""
     mission_item_retry_s: float = 0.25

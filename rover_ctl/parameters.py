@@ -325,6 +325,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("daemon.idle_wait_s", "DMN_IDLE_WAIT", 0.001, 1.0, START, {}),
     ("daemon.hold_speed_mps", "DMN_HOLD_SPEED", 0.0, 5.0, RW, {}),
     ("gcs.system_id", "SYSID_THISMAV", 1, 255, START, {}),
+    ("gcs.ground_station_system_id", "MAV_GCS_SYSID", 0, 255, START, {}),
     ("gcs.component_id", "GCS_COMPID", 1, 255, START, {}),
     ("gcs.heartbeat_period_s", "GCS_HB_PERIOD", 0.1, 10.0, START, {}),
     ("gcs.mission_item_retry_s", "GCS_MIS_RETRY", 0.05, 10.0, START, {}),

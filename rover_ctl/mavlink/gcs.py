@@ -193,6 +193,8 @@ class GcsLink:
         """Why the stored mission could not be loaded (the file was moved aside), if it could not."""
         self._changed_type = 0
         self.last_gcs_heartbeat_s: float | None = None
+        """When our ground station's (``ground_station_system_id``) last HEARTBEAT came."""
+        self._ground_station_seen = False
         """When a ground station's HEARTBEAT last arrived (for the GCS failsafe)."""
         self._next_heartbeat_s: float | None = None
         self.conn = mavutil.mavlink_connection(
@@ -295,11 +297,13 @@ class GcsLink:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
             if msg.type == mav.MAV_TYPE_GCS:
-                if self.last_gcs_heartbeat_s is None:
+                if not self._ground_station_seen:
                     # A first ground station: answer now rather than at the next period, so it
                     # finds its autopilot at once (on udpin nothing reached it before it spoke).
+                    self._ground_station_seen = True
                     self._next_heartbeat_s = None
-                self.last_gcs_heartbeat_s = now_s
+                if self.params.ground_station_system_id in (0, msg.get_srcSystem()):
+                    self.last_gcs_heartbeat_s = now_s  # the GCS-loss failsafe's, as ArduPilot's MAV_GCS_SYSID
             return
         if kind in GUIDED_ITEMS and getattr(msg, "current", 0) == GUIDED_ITEM_CURRENT:
             self._guided_item(msg)

@@ -47,6 +47,20 @@ def test_heartbeat_is_a_rover_autopilot_from_1_1(url, udp_port):
         assert hb.get_msgbuf()[0] == 0xFD  # MAVLink 2 start byte
 
 
+@pytest.mark.parametrize("ground_station_id, counted", [(255, {255}), (245, {245}), (0, {255, 245, 17})])
+def test_only_the_ground_stations_heartbeat_holds_off_the_gcs_failsafe(url, udp_port, ground_station_id, counted):
+    """As ArduPilot's MAV_GCS_SYSID: a heartbeat from any other system (a stranger on an unsigned
+    link) does not hide a lost ground station; every GCS is still answered."""
+    params = GcsParams(heartbeat_period_s=0.2, ground_station_system_id=ground_station_id)
+    with LinkThread(url, params=params) as lt:
+        for sysid in (17, 245, 255):
+            conn = gcs(udp_port, (sysid, 190))
+            before = lt.link.last_gcs_heartbeat_s
+            conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            expect(conn, "HEARTBEAT")  # answered either way; a new address only after its frame was read
+            assert (lt.link.last_gcs_heartbeat_s != before) == (sysid in counted), sysid
+
+
 def test_commands_are_dispatched_and_acked_to_the_sender(url, udp_port):
     handlers = DefaultHandlers(home=HOME)
     with LinkThread(url, params=FAST, handlers=handlers) as lt:
