@@ -2,7 +2,7 @@
 
 ``python -m bench soak`` (100,000 frames; ``--quick`` 10,000) or ``python -m bench.soak --frames N``.
 Starts ``rover-sitl`` (free running, real time) and ``rover-ctl run`` with its GCS link on
-``udpin:127.0.0.1:PORT`` and a stored mission, then sends from one UDP socket a seeded mix of
+``udpin:127.0.0.1:PORT`` and a mission store (empty at the start), then sends from one UDP socket a seeded mix of
 
 * random bytes (1-280 bytes per datagram),
 * valid frames of the handled message types corrupted (bytes flipped, truncated),
@@ -315,7 +315,7 @@ def run(quick: bool = False, frames: int | None = None, seed: int = 1) -> dict:
     result["markdown"] = "\n".join([
         f"{result['frames']:,} datagrams (40% random bytes, 30% corrupted frames, 30% valid frames of every handled "
         f"type with arbitrary fields), seed {seed}, one loopback UDP socket, sync probe every {BATCH} frames; "
-        "`rover-sitl` free running in real time, `rover-ctl run` with a stored mission.",
+        "`rover-sitl` free running in real time, `rover-ctl run` with a mission store, empty at the start.",
         "",
         "| frames | frames/s handled | crashes | longest heartbeat gap | handler exceptions caught | store changed |",
         "|---|---|---|---|---|---|",
