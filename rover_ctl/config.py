@@ -318,9 +318,6 @@ class GcsParams:
     """A GCS link listening on UDP (udpin) sends to this many ground stations at most: an address
     becomes one when a frame from it passes signing (with a key) and the gate; a newcomer beyond
     this replaces the one silent longest."""
-    peer_timeout_s: float = 10.0
-    """A ground station on a udpin GCS link that has sent nothing that passed for this long is sent
-    nothing more until it speaks again (ground stations send a HEARTBEAT every second)."""
     mission_store_path: str = "~/.local/state/rover-ctl/mission.json"
     """Where the current mission, fence and rally are persisted; empty = not persisted."""
     position_rate_hz: float = 4.0

@@ -364,7 +364,6 @@ _DECLARED: tuple[tuple, ...] = (
     ("daemon.link_chatter_s", "DMN_CHATTER_S", 0.0, 3600.0, START, {}),
     ("gcs.max_messages_per_poll", "GCS_MAX_MSGS", 1, 10000, START, {}),
     ("gcs.max_peers", "GCS_MAX_PEERS", 1, 64, START, {}),
-    ("gcs.peer_timeout_s", "GCS_PEER_TMO", 1.0, 3600.0, START, {}),
     ("gcs.require_signing", "GCS_SIGN_REQ", 0, 1, START, {}),
     ("gcs.signing_setup_from_loopback", "GCS_SIGN_LOCAL", 0, 1, START, {}),
     ("gcs.signing_timestamp_save_s", "GCS_SIGN_SAVE_S", 1.0, 3600.0, START, {}),

@@ -43,8 +43,8 @@ What a stranger's datagrams can cost is bounded (docs/gcs.md, "The gate"):
   signature check and the gate (``rover_ctl.mavlink.inbound``), after it; a refused frame is
   counted there (``inbound.dropped``, ``inbound.refused``, ``signing.rejected``), not logged;
 * on ``udpin`` the daemon sends to the ground stations in its own peer table
-  (``rover_ctl.mavlink.peers``: those whose frames passed, at most ``GcsParams.max_peers``,
-  forgotten after ``peer_timeout_s`` of silence), not to every address pymavlink ever heard from.
+  (``rover_ctl.mavlink.peers``: those whose frames passed, at most ``GcsParams.max_peers``, the
+  one silent longest replaced by a newcomer), not to every address pymavlink ever heard from.
 
 GUIDED destinations arrive as MAV_CMD_DO_REPOSITION (COMMAND_INT, as QGroundControl's "go to
 location" and MAVProxy's ``guided LAT LON ALT`` send it, or COMMAND_LONG; its CHANGE_MODE flag
@@ -239,8 +239,6 @@ class GcsLink:
             if msg is None:
                 break
             self._dispatch(msg, now_s)
-        if self.peers is not None:
-            self.peers.expire(now_s)
         self._send_all(self.service.tick(now_s))
         self.param_service.tick(now_s)
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:

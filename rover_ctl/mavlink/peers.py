@@ -13,9 +13,9 @@ connection is untouched; ``conn.clients`` stays empty):
 * ``admit(now_s)`` makes that source a peer, or refreshes it. The GCS link calls it for a frame
   that passed the signature check (when a key is set: signed with it, not merely accepted
   unsigned as RADIO_STATUS is) and the gate (``rover_ctl.mavlink.inbound``). At most
-  ``GcsParams.max_peers``; a newcomer beyond that replaces the peer that has been silent longest;
-* ``expire(now_s)`` forgets the peers silent for more than ``GcsParams.peer_timeout_s``; one
-  that speaks again is admitted again;
+  ``GcsParams.max_peers``; a newcomer beyond that replaces the peer that has been silent longest.
+  A silent peer is not forgotten otherwise: a ground station whose uplink failed (the GCS-loss
+  failsafe's case) must go on seeing the rover, as pymavlink's own udpin sends to everyone heard;
 * ``write`` sends a frame to each peer, so its cost is bounded by ``max_peers``; inside
   ``only(address)`` to that address alone (the answer to a refused request goes to its sender,
   which is not a peer if that request was all it sent).
@@ -70,8 +70,6 @@ class UdpPeers:
         """Addresses that became peers (again) over the link's life."""
         self.evicted = 0
         """Peers replaced by a newcomer while the table was full."""
-        self.expired = 0
-        """Peers forgotten after ``peer_timeout_s`` of silence."""
         conn.recv = self.recv
         conn.write = self.write
 
@@ -135,18 +133,6 @@ class UdpPeers:
             self.admitted += 1
             log.debug("GCS link: ground station %s", _text(address))
         peers[address] = now_s
-
-    def expire(self, now_s: float) -> None:
-        """Forget the peers silent for more than ``peer_timeout_s``."""
-        peers = self._peers
-        timeout_s = self.params.peer_timeout_s
-        while peers:
-            oldest, heard_s = next(iter(peers.items()))
-            if now_s - heard_s <= timeout_s:
-                break
-            del peers[oldest]
-            self.expired += 1
-            log.debug("GCS link: ground station %s silent for %.0f s: no longer sent to", _text(oldest), now_s - heard_s)
 
 
 def _text(address: Address) -> str:

@@ -34,7 +34,7 @@ from rover_ctl.mavlink.inbound import DROP_REASONS
 from rover_ctl.mission.store import MissionStore, to_json
 from rover_ctl.mission.validate import validate
 
-PARAMS = GcsParams(heartbeat_period_s=1.0, mission_store_path="", peer_timeout_s=3600.0)
+PARAMS = GcsParams(heartbeat_period_s=1.0, mission_store_path="")
 """(The harness's clock jumps by 10 s to make a heartbeat due: its ground station must not expire.)"""
 STORED = json.dumps(to_json(sample_mission()), indent=1).encode()
 """The store file each example starts with (written without the store's fsyncs: speed)."""
