@@ -77,16 +77,24 @@ class EventLog:
     """events.jsonl: what happened when (vehicle time), for the report."""
 
     def __init__(self, path: Path | None):
+        self.path = path
         self._file = open(path, "w", encoding="utf-8") if path else None
 
     def write(self, t_s: float, kind: str, **fields: Any) -> None:
         if self._file:
-            self._file.write(json.dumps({"t_s": round(t_s, 3), "type": kind, **fields}) + "\n")
-            self._file.flush()
+            try:
+                self._file.write(json.dumps({"t_s": round(t_s, 3), "type": kind, **fields}) + "\n")
+                self._file.flush()
+            except OSError as exc:  # a full disk: the daemon goes on without its event log
+                log.warning("logs: %s: %s; not written from here on", self.path, exc)
+                self._file = None
 
     def close(self) -> None:
         if self._file:
-            self._file.close()
+            try:
+                self._file.close()
+            except OSError as exc:
+                log.warning("logs: %s: %s on closing; its last lines are lost", self.path, exc)
 
 
 class Daemon:
@@ -302,9 +310,13 @@ class Daemon:
         self.close()
 
     def close(self) -> None:
+        """Close everything, each whatever the others do (a full disk must not leave a link open)."""
         for closeable in (self.gcs, self.table, self.link, self.csv, self.events, *self.tlogs):
             if closeable is not None:
-                closeable.close()
+                try:
+                    closeable.close()
+                except Exception as exc:  # noqa: BLE001: shutting down, the rest must still close
+                    log.warning("closing %s: %s", type(closeable).__name__, exc)
 
     # ---- one loop turn -------------------------------------------------------------------------
 

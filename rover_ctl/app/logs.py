@@ -271,8 +271,17 @@ class TlogWriter:
         self.frames += 1
 
     def close(self) -> None:
-        if not self._file.closed:
-            self._file.close()
+        _close_quietly(self._file, self.path)
+
+
+def _close_quietly(handle, path: Path) -> None:
+    """Close a log file; a flush that fails now (a full disk) loses the tail, not the shutdown."""
+    if handle.closed:
+        return
+    try:
+        handle.close()
+    except OSError as exc:
+        log.warning("logs: %s: %s on closing; its last lines are lost", path, exc)
 
 
 class CsvLog:
@@ -289,21 +298,36 @@ class CsvLog:
         self._writer = csv.writer(self._file)
         self._writer.writerow(self.columns)
         self.rows = 0
+        self.failed: str | None = None
+        """Why writing stopped (a full disk): the control loop goes on without its CSV."""
 
     def write(self, row: dict[str, Any]) -> None:
         """One row; a missing column is empty, an unknown one a ValueError (as DictWriter's "raise")."""
         if not row.keys() <= self._names:
             raise ValueError(f"dict contains fields not in fieldnames: {', '.join(map(repr, row.keys() - self._names))}")
+        if self.failed is not None:
+            return
         digits = self._digits
-        self._writer.writerow([round(v, digits) if isinstance(v, float) else v for v in map(row.get, self.columns, repeat(""))])
+        try:
+            self._writer.writerow([round(v, digits) if isinstance(v, float) else v for v in map(row.get, self.columns, repeat(""))])
+        except OSError as exc:
+            self._fail(exc)
+            return
         self.rows += 1
 
     def flush(self) -> None:
-        self._file.flush()
+        if self.failed is None:
+            try:
+                self._file.flush()
+            except OSError as exc:
+                self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        self.failed = str(exc)
+        log.warning("logs: %s: %s; not written from here on", self.path, exc)
 
     def close(self) -> None:
-        if not self._file.closed:
-            self._file.close()
+        _close_quietly(self._file, self.path)
 
 
 class Chatter:

@@ -5,6 +5,8 @@ than ``daemon.log_max_total_mb``, the tlogs stop with one warning and one call b
 from __future__ import annotations
 
 import logging
+import os
+from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
@@ -76,3 +78,25 @@ def test_a_failed_write_stops_the_tlog_with_one_warning(tmp_path, caplog):
             tlog.write(FRAME)  # never raises: the link it hangs on goes on
     assert tlog.frames == 0 and tlog.unwritten == 10 and "No space" in tlog.failed
     assert len([r for r in caplog.records if "No space" in r.getMessage()]) == 1
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full (Linux) to stand for a full disk")
+def test_on_a_full_disk_every_log_stops_quietly_and_closes(caplog):
+    """/dev/full fails every write as a full disk does: control.csv and events.jsonl raised into the
+    control loop (the daemon exited with 70), and a tlog's close raised at shutdown."""
+    from rover_ctl.app.daemon import EventLog
+    from rover_ctl.app.logs import CsvLog
+
+    full = Path("/dev/full")
+    csv_log, events, tlog = CsvLog(full, ["t_s", "x"]), EventLog(full), TlogWriter(full)
+    with caplog.at_level(logging.WARNING):
+        for step in range(2000):  # past the CSV's buffer: its writes reach the disk
+            csv_log.write({"t_s": step * 0.04, "x": 1.0})
+            events.write(step * 0.04, "mode", mode="AUTO")
+            tlog.write(FRAME)
+        csv_log.flush()
+        for log_file in (csv_log, events, tlog):
+            log_file.close()  # never raises
+    assert csv_log.failed and tlog.failed
+    warnings = [r.getMessage() for r in caplog.records if "No space" in r.getMessage()]
+    assert 3 <= len(warnings) <= 6, warnings  # a write's and at most a close's per log, not one per step
