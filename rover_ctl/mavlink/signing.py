@@ -331,7 +331,13 @@ class LinkSigning:
 
     def _disable(self) -> None:
         if self.store is not None:
-            self.store.remove_key()
+            try:
+                self.store.remove_key()
+            except (SigningError, OSError) as exc:  # the file is not ours to delete, or cannot be
+                # Signing stays on: off for this run only would come back on at the next start.
+                log.warning("GCS link: all-zero SETUP_SIGNING refused: %s", exc)
+                self.notify("Signing not disabled: the key file cannot be removed", int(Severity.WARNING))
+                return
         s = self.state
         s.secret_key, s.sign_outgoing, s.allow_unsigned_callback = None, False, None
         log.warning("GCS link: signing disabled by a key holder (all-zero SETUP_SIGNING)")

@@ -201,6 +201,20 @@ def test_without_a_key_setup_signing_needs_loopback_and_the_option(tmp_path, udp
         conn.close()
 
 
+def test_switching_signing_off_keeps_it_on_when_the_key_file_cannot_be_removed(store, udp_port):
+    """The key file replaced by something else while running: removing it is refused (it is not a
+    key), which escaped the link's handler unannounced; signing stays on and the GCS is told."""
+    with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=LINK, signing=store) as lt:
+        store.key_path.write_text("not a key\n")
+        owner = client(udp_port, KEY)
+        owner.mav.setup_signing_send(1, 1, [0] * 32, 0)
+        text = owner.recv_match(type="STATUSTEXT", blocking=True, timeout=WAIT_S)
+        assert text is not None and text.text.startswith("Signing not disabled")
+        assert lt.link.signing.enabled and store.key_path.read_text() == "not a key\n"
+        assert not lt.link.inbound.failures
+        owner.close()
+
+
 def test_required_signing_cannot_be_switched_off(store, udp_port):
     params = GcsParams(heartbeat_period_s=0.2, require_signing=True)
     with LinkThread(f"udpin:127.0.0.1:{udp_port}", params=params, signing=store) as lt:
