@@ -593,6 +593,9 @@ class VehicleLink:
         pending.sent_wall_s = now
 
     def _on_ack(self, msg: Any) -> CommandResult | None:
+        if getattr(msg, "target_system", 0) not in (0, self.params.source_system) or \
+                getattr(msg, "target_component", 0) not in (0, self.params.source_component):
+            return None  # another ground station's answer on a shared link (ArduPilot addresses its ACKs)
         pending = self._pending.get(msg.command)
         if pending is None or msg.result == mavlink.MAV_RESULT_IN_PROGRESS:
             return None

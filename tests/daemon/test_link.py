@@ -158,6 +158,16 @@ def test_a_repeated_command_waits_for_the_outstanding_one_instead_of_being_sent_
     assert receive(vehicle, "COMMAND_LONG").param1 == 1.0
 
 
+def test_an_ack_addressed_to_another_ground_station_is_not_ours(pair):
+    link, vehicle, _ = pair
+    results: list[CommandResult] = []
+    link.arm_async(True, on_result=results.append)
+    receive(vehicle, "COMMAND_LONG")
+    vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_DENIED, 0, 0, 255, 230)  # MAVProxy's
+    vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED, 0, 0, 255, 190)  # ours
+    assert drain(link, CommandResult).accepted and [r.result for r in results] == [mav.MAV_RESULT_ACCEPTED]
+
+
 def test_unanswered_command_fails_after_the_retries(pair):
     link, vehicle, clock = pair
     results: list[CommandResult] = []
