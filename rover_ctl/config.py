@@ -305,9 +305,10 @@ class GcsParams:
     """Largest list (wire items, home included) accepted per mission type."""
     mission_upload_margin_s: float = 10.0
     """Upload deadline: one transaction (a sender's upload of one mission type, restarts included)
-    must end within ``count * mission_upload_timeout_s`` plus this after its first MISSION_COUNT,
-    or it is cancelled: an upload that keeps making progress takes at most the first term, and this
-    covers a client's resent COUNTs (5, 1.5 s apart). A repeated COUNT does not extend it."""
+    must end within ``count * mission_upload_timeout_s`` plus this after its first MISSION_COUNT
+    (``count`` the largest in it), or it is cancelled: an upload that keeps making progress takes
+    at most the first term, and this covers a client's resent COUNTs (5, 1.5 s apart). A repeated
+    COUNT does not extend it beyond that."""
     mission_upload_holdoff_s: float = 5.0
     """A sender whose upload was cancelled at its deadline (``mission_upload_margin_s``) may not
     start another of the same mission type for this long, so that another ground station (which

@@ -22,8 +22,9 @@ Behaviour follows mavlink.io (services/mission) and ArduPilot's ``MissionItemPro
   the upload is cancelled (MAV_MISSION_OPERATION_CANCELLED) and the stored mission is untouched.
   If the final ACK is lost and the sender repeats the last item, the ACK is repeated.
 * Deadline: a transaction must end ``upload_budget_s(count)`` after its first COUNT
-  (``count * mission_upload_timeout_s + mission_upload_margin_s``: each item may take up to the
-  no-progress timeout, the margin covers resent COUNTs). A restart does not extend it, nor does
+  (``count * mission_upload_timeout_s + mission_upload_margin_s``, ``count`` the largest COUNT in
+  it: each item may take up to the no-progress timeout, the margin covers resent COUNTs). A
+  restart does not extend it beyond that, nor does
   a COUNT from the same sender within ``mission_upload_timeout_s`` of a no-progress cancel (a
   restart too). At the deadline the upload is cancelled as for a timeout, and its sender's COUNTs
   of that type are DENIED for ``mission_upload_holdoff_s`` so that another sender can start:
@@ -217,8 +218,11 @@ class _Upload:
     sender: Sender
     mission_type: int
     count: int
+    started_s: float
+    """When the transaction's first COUNT came (restarts keep it)."""
     deadline_s: float
-    """The transaction ends by then (set by its first COUNT; restarts keep it)."""
+    """The transaction ends by then: ``started_s`` plus the budget of the largest COUNT in it, so
+    that a restart neither extends it nor cuts short a larger upload that replaced a small one."""
     received: list[MissionItem] = field(default_factory=list)
     last_request_s: float = 0.0
     last_progress_s: float = 0.0
@@ -230,6 +234,7 @@ class _Lapsed:
     ``restart_until_s`` restarts it (keeping ``deadline_s``); before ``barred_until_s`` it is DENIED."""
 
     sender: Sender
+    started_s: float
     deadline_s: float
     restart_until_s: float = -math.inf
     barred_until_s: float = -math.inf
@@ -329,9 +334,9 @@ class MissionService:
         replies = []
         for mission_type, up in list(self._uploads.items()):
             if now_s >= up.deadline_s:
-                lapsed = _Lapsed(up.sender, up.deadline_s, barred_until_s=now_s + self.params.mission_upload_holdoff_s)
+                lapsed = _Lapsed(up.sender, up.started_s, up.deadline_s, barred_until_s=now_s + self.params.mission_upload_holdoff_s)
             elif now_s - up.last_progress_s >= self.params.mission_upload_timeout_s:
-                lapsed = _Lapsed(up.sender, up.deadline_s, restart_until_s=now_s + self.params.mission_upload_timeout_s)
+                lapsed = _Lapsed(up.sender, up.started_s, up.deadline_s, restart_until_s=now_s + self.params.mission_upload_timeout_s)
             else:
                 continue
             del self._uploads[mission_type]
@@ -389,20 +394,18 @@ class MissionService:
         # A repeated COUNT from the uploader restarts, as does one just after a no-progress cancel:
         # either keeps the transaction's deadline.
         previous = self._uploads.pop(mission_type, None)
-        deadline_s = None
-        if previous is not None:
-            deadline_s = previous.deadline_s
-        elif mine and now_s < lapsed.restart_until_s:
-            deadline_s = lapsed.deadline_s
+        kept = previous if previous is not None else lapsed if mine and now_s < lapsed.restart_until_s else None
         self._completed = None
         if msg.count > self.params.mission_max_items:
             return [self._ack(sender, mav.MAV_MISSION_NO_SPACE, mission_type)]
         if msg.count == 0:
             return [self._finish(sender, mission_type, [], 0)]
-        if deadline_s is None:
-            deadline_s = now_s + self.upload_budget_s(msg.count)
+        started_s = kept.started_s if kept is not None else now_s
+        deadline_s = started_s + self.upload_budget_s(msg.count)
+        if kept is not None:
+            deadline_s = max(deadline_s, kept.deadline_s)
         self._lapsed.pop(mission_type, None)
-        up = self._uploads[mission_type] = _Upload(sender, mission_type, msg.count, deadline_s, last_progress_s=now_s)
+        up = self._uploads[mission_type] = _Upload(sender, mission_type, msg.count, started_s, deadline_s, last_progress_s=now_s)
         return [self._request(up, now_s)]
 
     def _on_item(self, msg, sender: Sender, now_s: float) -> list:

@@ -344,6 +344,22 @@ def test_a_count_just_after_a_no_progress_cancel_is_a_restart_and_keeps_the_dead
     assert one(send(svc, count(2), MAVSDK, deadline + 0.1), "MISSION_ACK").type == mav.MAV_MISSION_DENIED
 
 
+def test_a_larger_upload_that_restarts_a_small_one_gets_the_larger_budget_from_the_first_count(svc, rec, mission):
+    """A second `wp load` of a bigger mission: its deadline was the first COUNT's (2 items, 13 s),
+    which cancelled a 300-item upload progressing at 20 items a second at seq 250."""
+    wire = wire_items(mission, MissionType.MISSION)
+    one(send(svc, count(2), MAVPROXY, 0.0), "MISSION_REQUEST_INT")
+    t = svc.upload_budget_s(2) - 1.0
+    one(send(svc, count(len(wire)), MAVPROXY, t), "MISSION_REQUEST_INT")
+    step = 2.0 / len(wire)  # steady progress, ending 1 s past the small upload's deadline
+    for seq, item in enumerate(wire):
+        t += step
+        assert all(r.get_type() == "MISSION_REQUEST_INT" for r in svc.tick(t)), (seq, t)
+        reply = send(svc, item_int(item, seq), MAVPROXY, t)[0]
+    assert reply.type == mav.MAV_MISSION_ACCEPTED and len(rec.commits) == 1
+    assert svc.upload_budget_s(2) < t <= svc.upload_budget_s(len(wire))
+
+
 def test_a_slow_upload_that_keeps_progressing_ends_within_its_deadline(svc, rec, mission):
     wire = wire_items(mission, MissionType.MISSION)
     t, step = 0.0, PARAMS.mission_upload_timeout_s - 0.01  # each item just before the no-progress timeout
