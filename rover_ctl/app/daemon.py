@@ -49,7 +49,7 @@ from rover_ctl.mavlink import budget
 from rover_ctl.mavlink.budget import StreamPlan
 from rover_ctl.mavlink.commands import ACK_LATER
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
-from rover_ctl.mavlink.vehicle import NO_ANSWER, PYMAVLINK_DEFAULT_BAUD, Battery, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.vehicle import NO_ANSWER, PYMAVLINK_DEFAULT_BAUD, Battery, CommandResult, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
 from rover_ctl.mavlink.signing import KeyStore
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
@@ -143,6 +143,8 @@ class Daemon:
         self._streams_checked_s = math.inf
         self._next_override_wall_s = 0.0
         self._arm_results = {arm: functools.partial(self._on_arm_result, arm=arm) for arm in (True, False)}
+        self._arm_accepted: bool | None = None
+        """An arming or disarming the vehicle just ACCEPTED, for its COMMAND_ACK's item."""
         """One callback per arming direction, so that a repeated request joins the waiting one (VehicleLink.command_async)."""
 
     @property
@@ -377,6 +379,9 @@ class Daemon:
         elif isinstance(item, VehicleStatus):
             self.vehicle = item
             self.autopilot.on_vehicle(item.armed)
+        elif isinstance(item, CommandResult) and item.command == mav.MAV_CMD_COMPONENT_ARM_DISARM and self._arm_accepted is not None:
+            self.autopilot.on_vehicle(self._arm_accepted)
+            self._arm_accepted = None
         elif isinstance(item, Battery):
             self.battery = item
         elif isinstance(item, VehicleText):
@@ -490,9 +495,11 @@ class Daemon:
         stations that asked (FAILED when it gave none). ACCEPTED means the vehicle has armed or
         disarmed (ArduPilot answers after the change, not before), so the autopilot takes it at
         once rather than at the vehicle's next heartbeat, up to a second later; the heartbeats
-        stay the truth from then on."""
+        stay the truth from then on. Taken in the stream's order, with the COMMAND_ACK's item
+        (``_on_item``): this runs while the link decodes, before the items read with the ACK are
+        handled, and a heartbeat the vehicle sent before it armed would otherwise undo it."""
         if result.accepted:
-            self.autopilot.on_vehicle(arm)
+            self._arm_accepted = arm
         unanswered = result.result == NO_ANSWER
         if not result.accepted:
             text = ("Vehicle did not answer arming/disarming" if unanswered else

@@ -189,6 +189,32 @@ def test_an_accepted_arming_drives_at_once_not_at_the_next_heartbeat(tmp_path):
     assert float(throttle["t_s"]) <= ack_s + 0.1 and int(throttle["throttle_us"]) > 1500, throttle
 
 
+@pytest.mark.parametrize("arm", [True, False])
+def test_an_accepted_arming_is_taken_in_stream_order_with_the_heartbeats_read_with_it(arm):
+    """The ACK's callback runs while the link decodes, before the items read with it are handled:
+    a heartbeat the vehicle sent just before it armed (or disarmed), read in the same batch, undid
+    the ACCEPTED until the next heartbeat, a second later. Now the ACK's own item applies it."""
+    from rover_ctl.app.daemon import Daemon
+    from rover_ctl.config import Config
+    from rover_ctl.mavlink.vehicle import CommandResult, VehicleStatus
+    from rover_ctl.vocabulary import mav
+
+    from types import SimpleNamespace
+
+    daemon = Daemon(Config())
+    answered = []
+    daemon.gcs = SimpleNamespace(command_result=lambda command, result: answered.append(result))  # no GCS link
+    daemon.autopilot.on_vehicle(not arm)
+    accepted = CommandResult(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED)
+    daemon._arm_results[arm](accepted)  # the link decoded the ACK: items [heartbeat before it, ACK]
+    for item in (VehicleStatus(0.0, not arm, RoverMode.HOLD, 3), accepted):
+        daemon._on_item(item)
+    assert daemon.autopilot.armed is arm
+    daemon._on_item(VehicleStatus(1.0, arm, RoverMode.HOLD, 3))  # the next heartbeat agrees; nothing left over
+    daemon._on_item(CommandResult(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED))
+    assert daemon.autopilot.armed is arm and daemon._arm_accepted is None and answered == [mav.MAV_RESULT_ACCEPTED]
+
+
 def test_the_daemon_refuses_arming_without_a_recent_fix(tmp_path):
     """The daemon's own pre-arm check: after a GPS dropout its estimator still has a position
     (dead reckoning), but arming now would start the mission blind; refused with its reason,
