@@ -118,18 +118,22 @@ def _run(args: argparse.Namespace) -> int:
         return t
 
     try:
-        with Live(table(Progress()), console=console, refresh_per_second=4, transient=False) as live:
-            last, latest = [0.0], [None]
+        try:
+            with Live(table(Progress()), console=console, refresh_per_second=4, transient=False) as live:
+                last, latest = [0.0], [None]
 
-            def on_tick(p: Progress) -> None:
-                latest[0] = p
-                if time.monotonic() - last[0] > 0.25:
-                    last[0] = time.monotonic()
-                    live.update(table(p))
+                def on_tick(p: Progress) -> None:
+                    latest[0] = p
+                    if time.monotonic() - last[0] > 0.25:
+                        last[0] = time.monotonic()
+                        live.update(table(p))
 
-            metrics = simulate(options, on_tick)
-            if latest[0] is not None:  # the last tick, not the last one shown (shown at most 4 times a second)
-                live.update(table(latest[0]), refresh=True)
+                metrics = simulate(options, on_tick)
+                if latest[0] is not None:  # the last tick, not the last one shown (shown at most 4 times a second)
+                    live.update(table(latest[0]), refresh=True)
+        finally:
+            if not console.is_terminal:  # Live ends its last frame with a newline only on a terminal
+                console.line()
     except MissionFileError as exc:
         raise UserError(str(exc)) from None
     except (SimError, ReportError) as exc:

@@ -279,3 +279,12 @@ def test_sigterm_to_sim_stops_its_emulator_and_daemon(tmp_path):
                 os.kill(int(pid), signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+def test_sim_output_piped_puts_its_verdict_on_its_own_line(tmp_path, capsys):
+    """Off a terminal (make demo's log, CI) rich's live table ended without a newline and the
+    verdict followed its bottom border on the same line."""
+    assert main(["sim", "missions/cmac_jump.waypoints", "--lockstep", "--out", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    verdict = next(i for i, line in enumerate(lines) if "waypoints," in line)
+    assert lines[verdict].startswith("success: 3/3 waypoints") and lines[verdict - 1].rstrip().endswith("┘"), lines[verdict - 1:]
