@@ -280,6 +280,8 @@ class VehicleLink:
         """The latest RADIO_STATUS of a telemetry radio on the line, if there is one."""
         self._next_heartbeat_s = 0.0
         self._pending: dict[int, _Pending] = {}
+        self._queued: dict[int, _Pending] = {}
+        """Per command, the request with other parameters waiting for the pending one's answer."""
         self._held: list[Any] = []
         self._parsed: deque[Any] = deque()  # messages read but not decoded yet (a read can span frames)
         self.version: VehicleVersion | None = None
@@ -521,6 +523,7 @@ class VehicleLink:
             if pending.attempts > self.command_retries:
                 del self._pending[pending.command]
                 pending.answer(CommandResult(pending.command, NO_ANSWER))
+                self._send_queued(pending.command, now)
                 continue
             self._send_command(pending, now)
 
@@ -570,20 +573,35 @@ class VehicleLink:
 
     def command_async(self, command: int, *params: float, on_result: Callable[[CommandResult], None] | None = None) -> None:
         """Send COMMAND_LONG; retried by ``tick`` until acknowledged; ``on_result`` gets the outcome.
-        A newer request for the same command with other parameters replaces an unanswered older
-        one. The same request again while it waits for its answer is not sent again: it waits for
-        that answer (a ground station repeating a disarm a thousand times put a thousand
-        COMMAND_LONGs on the vehicle's radio); its ``on_result`` joins the waiters unless already
-        among them, up to ``MAX_COMMAND_WAITERS``."""
+
+        One request per command is on the wire at a time, because a COMMAND_ACK names only the
+        command: a disarm still being retried when an arm replaced it had its ACCEPTED taken as the
+        arm's. So a request with other parameters waits (queued) for the pending one's answer or
+        last retry, then goes; a later one replaces it in the queue (its waiters are not answered:
+        the ground station's are, by the command's next result, ``GcsLink.command_result``). The
+        same request again, pending or queued, is not sent again: it
+        waits for that answer (a ground station repeating a disarm a thousand times put a
+        thousand COMMAND_LONGs on the vehicle's radio); its ``on_result`` joins the waiters unless
+        already among them, up to ``MAX_COMMAND_WAITERS``."""
         full = tuple(float(p) for p in params) + (0.0,) * (7 - len(params))
-        pending = self._pending.get(command)
-        if pending is not None and pending.params == full:
-            if on_result is not None and on_result not in pending.waiters and len(pending.waiters) < MAX_COMMAND_WAITERS:
-                pending.waiters.append(on_result)
+        for waiting in (self._pending.get(command), self._queued.get(command)):
+            if waiting is not None and waiting.params == full:
+                if on_result is not None and on_result not in waiting.waiters and len(waiting.waiters) < MAX_COMMAND_WAITERS:
+                    waiting.waiters.append(on_result)
+                return
+        request = _Pending(command, full, 0.0, 0, [on_result] if on_result is not None else [])
+        if command not in self._pending:
+            self._pending[command] = request
+            self._send_command(request, self._wall())
             return
-        pending = _Pending(command, full, 0.0, 0, [on_result] if on_result is not None else [])
-        self._pending[command] = pending
-        self._send_command(pending, self._wall())
+        self._queued[command] = request
+
+    def _send_queued(self, command: int, now: float) -> None:
+        """The pending request of ``command`` is answered or given up: the queued one goes."""
+        request = self._queued.pop(command, None)
+        if request is not None:
+            self._pending[command] = request
+            self._send_command(request, now)
 
     def _send_command(self, pending: _Pending, now: float) -> None:
         self.conn.mav.command_long_send(
@@ -602,6 +620,7 @@ class VehicleLink:
         del self._pending[msg.command]
         result = CommandResult(msg.command, msg.result)
         pending.answer(result)
+        self._send_queued(msg.command, self._wall())
         return result
 
     def arm_async(self, arm: bool, on_result: Callable[[CommandResult], None] | None = None) -> None:
@@ -640,7 +659,12 @@ class VehicleLink:
         deadline = self._wall() + limit
         while not results:
             if self._wall() > deadline:
-                self._pending.pop(command, None)
+                for table in (self._queued, self._pending):
+                    waiting = table.get(command)
+                    if waiting is not None and results.append in waiting.waiters:
+                        del table[command]
+                        if table is self._pending:
+                            self._send_queued(command, self._wall())
                 return CommandResult(command, NO_ANSWER)
             self._pump(0.02)
         return results[0]

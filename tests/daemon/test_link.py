@@ -18,7 +18,7 @@ from rover_ctl.mavlink.vehicle import (MAX_COMMAND_WAITERS, CommandResult, Frame
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from support import free_port  # noqa: E402
 
-from rover_ctl.vocabulary import mav  # noqa: E402  (not mavutil.mavlink: MAVLink 1's if another module imported mavutil first)
+from rover_ctl.vocabulary import ARM_FORCE_MAGIC, mav  # noqa: E402  (not mavutil.mavlink: MAVLink 1's if another module imported mavutil first)
 
 
 class FakeClock:
@@ -156,6 +156,26 @@ def test_a_repeated_command_waits_for_the_outstanding_one_instead_of_being_sent_
     assert sum(len(r) for r in others) == MAX_COMMAND_WAITERS - 1
     link.arm_async(True, on_result=first.append)  # other parameters: a new request, sent
     assert receive(vehicle, "COMMAND_LONG").param1 == 1.0
+
+
+def test_one_request_per_command_on_the_wire_so_an_ack_answers_the_right_one(pair):
+    """A COMMAND_ACK names only the command: a disarm still being retried when an arm replaced it
+    had its ACCEPTED taken as the arm's. The arm now waits for the disarm's answer."""
+    link, vehicle, _ = pair
+    disarm, arm, superseded = [], [], []
+    link.arm_async(False, on_result=disarm.append)
+    assert receive(vehicle, "COMMAND_LONG").param1 == 0.0
+    link.arm_async(True, on_result=superseded.append)  # queued ...
+    link.arm_async(True, on_result=superseded.append)  # (the same again joins it)
+    link.command_async(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, float(ARM_FORCE_MAGIC), on_result=arm.append)  # ... replaced
+    assert vehicle.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.3) is None  # nothing while the disarm waits
+    vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_ACCEPTED)
+    assert drain(link, CommandResult).accepted and [r.result for r in disarm] == [mav.MAV_RESULT_ACCEPTED] and arm == []
+    sent = receive(vehicle, "COMMAND_LONG")  # then the arm goes
+    assert (sent.param1, sent.param2) == (1.0, float(ARM_FORCE_MAGIC))
+    vehicle.mav.command_ack_send(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_DENIED)
+    assert drain(link, CommandResult).result == mav.MAV_RESULT_DENIED and [r.result for r in arm] == [mav.MAV_RESULT_DENIED]
+    assert superseded == [] and vehicle.recv_match(type="COMMAND_LONG", blocking=True, timeout=0.3) is None
 
 
 def test_an_ack_addressed_to_another_ground_station_is_not_ours(pair):
