@@ -193,9 +193,10 @@ class GcsLink:
         """Why the stored mission could not be loaded (the file was moved aside), if it could not."""
         self._changed_type = 0
         self.last_gcs_heartbeat_s: float | None = None
-        """When our ground station's (``ground_station_system_id``) last HEARTBEAT came."""
+        """When our ground station's (``ground_station_system_id``) last HEARTBEAT came (for the
+        GCS-loss failsafe)."""
         self._ground_station_seen = False
-        """When a ground station's HEARTBEAT last arrived (for the GCS failsafe)."""
+        """Whether any ground station's HEARTBEAT came yet (the first is answered at once)."""
         self._next_heartbeat_s: float | None = None
         self.conn = mavutil.mavlink_connection(
             url,
