@@ -121,6 +121,11 @@ class PlannerParams:
     the planner refuses to plan: docs/missions.md)."""
     lookahead_m: float = 3.0
     """Carrot distance: the path target is this far along the path beyond the rover's projection."""
+    max_corner_cut_m: float = 0.25
+    """Where the path bends, the carrot is pulled back towards the rover until the straight line
+    from the rover to it passes within this of every bend between (pure pursuit cuts corners, and
+    the rover drives roughly that line): a bend around an obstacle then keeps at least
+    ``clearance_margin_m`` minus this free, where a 3 m carrot cut a tight detour by up to a metre."""
     projection_window_m: float = 10.0
     """The rover is projected on the path only up to this far beyond its last projection, so a
     path that comes back near itself does not make the carrot jump ahead."""

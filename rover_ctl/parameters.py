@@ -240,6 +240,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("planner.clearance_margin_m", "PLN_CLEARANCE", 0.0, 10.0, RW, {}),
     ("planner.circle_segments", "PLN_CIRCLE_SEGS", 4, 64, RW, {}),
     ("planner.lookahead_m", "PLN_LOOKAHEAD", 0.2, 50.0, RW, {}),
+    ("planner.max_corner_cut_m", "PLN_CORNER_CUT", 0.01, 10.0, RW, {}),
     ("planner.projection_window_m", "PLN_PROJ_WINDOW", 0.5, 100.0, RW, {}),
     ("planner.replan_off_path_m", "PLN_REPLAN_DIST", 0.2, 100.0, RW, {}),
     ("planner.replan_min_interval_s", "PLN_REPLAN_INTVL", 0.0, 60.0, RW, {}),

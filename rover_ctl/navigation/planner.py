@@ -43,6 +43,11 @@ circle, and polygon corners are rounded with the chord error compensated, so the
 approximation never cuts into the clearance. Graph nodes sit ``NODE_OFFSET_M`` further out than
 the zone used to check edges, so an edge along a zone's side is not refused by rounding.
 
+The carrot: ``PathFollower`` gives the navigator the point ``lookahead_m`` along the path beyond
+the rover's projection, pulled back at bends so that the straight line from the rover to it passes
+within ``max_corner_cut_m`` of each bend between (``Path.target``): pure pursuit drives roughly
+that line, and an unlimited 3 m carrot cut a detour around a blocked circle into the obstacle.
+
 Ends outside F: a start inside the clearance band or outside the fence (pushed there, or a fence
 breach) first goes straight to the nearest free point, so the rover can always get back; a goal in
 the clearance band is reached from the nearest free point by a last straight segment. A goal
@@ -61,7 +66,8 @@ API:
       .near_persistent(path, s_from_m) -> bool    the path beyond s_from_m would touch one
       .expire(now_s) -> bool                      forget blocked circles older than blocked_ttl_s
     Path.project(point_en, s_min_m=0, s_max_m=inf) -> (s_m, cross_track_m)
-    Path.point_at(s_m) -> (east_m, north_m);  Path.carrot(point_en, lookahead_m)
+    Path.point_at(s_m) -> (east_m, north_m);  Path.carrot(point_en, lookahead_m, max_cut_m=inf)
+    Path.target(point_en, s_m, lookahead_m, max_cut_m) -> the carrot, pulled back at bends
     PathFollower(planner, params).update(now_s, position_en, goal_en) -> Guidance
       Guidance.target_en (the carrot, None when there is no path), cross_track_m, remaining_m,
       replanned, error;  PathFollower.block(now_s, center_en) re-plans around a blocked leg;
@@ -102,6 +108,9 @@ UNBOUNDED_M = 1.0e6
 
 PAIR_BLOCK = 1 << 16
 """Vertex pairs tested for tangency at once while the graph is built (bounds its memory)."""
+
+CARROT_BISECTIONS = 10
+"""Bisection steps of a carrot pulled back at a bend (``Path.target``): the lookahead to 1/1024."""
 
 
 @dataclass(frozen=True)
@@ -233,10 +242,58 @@ class Path:
             return self.length_m, math.dist(point_en, self.points[-1])
         return found
 
-    def carrot(self, point_en: EN, lookahead_m: float) -> EN:
-        """Pure-pursuit target: ``lookahead_m`` along the path beyond the projection of ``point_en``."""
+    def carrot(self, point_en: EN, lookahead_m: float, max_cut_m: float = math.inf) -> EN:
+        """Pure-pursuit target: ``lookahead_m`` along the path beyond the projection of ``point_en``
+        (pulled back at bends as ``target``)."""
         s, _ = self.project(point_en)
-        return self.point_at(s + lookahead_m)
+        return self.target(point_en, s, lookahead_m, max_cut_m)
+
+    def target(self, point_en: EN, s_m: float, lookahead_m: float, max_cut_m: float = math.inf) -> EN:
+        """The carrot for a rover at ``point_en`` projected at arc length ``s_m``: the point at
+        ``s_m + lookahead_m``, pulled back towards ``s_m`` until the straight line from the rover
+        to it passes within ``max_cut_m`` of every path vertex (bend) between them.
+
+        The rover drives roughly that straight line, so this bounds how far it cuts a bend. The
+        first bend ahead is always acceptable (no vertex lies between), so the carrot never comes
+        closer than it; beyond it the largest acceptable arc length is found by bisection (the
+        cut grows with the arc length along a convex bend)."""
+        cum = self._cumulative
+        far = min(s_m + lookahead_m, cum[-1])
+        first = bisect.bisect_right(cum, s_m)  # the first vertex beyond s_m
+        if max_cut_m == math.inf or first >= len(cum) - 1 or cum[first] >= far:
+            return self.point_at(far)  # no bend between: the plain carrot
+        if self._cut(point_en, self.point_at(far), first, far) <= max_cut_m:
+            return self.point_at(far)
+        ok_s, bad_s = cum[first], far
+        for i in range(first + 1, len(cum) - 1):  # the last bend the rover can aim at directly
+            if cum[i] >= far:
+                break
+            if self._cut(point_en, self.points[i], first, cum[i]) > max_cut_m:
+                bad_s = cum[i]
+                break
+            ok_s = cum[i]
+        for _ in range(CARROT_BISECTIONS):
+            mid = 0.5 * (ok_s + bad_s)
+            if self._cut(point_en, self.point_at(mid), first, mid) <= max_cut_m:
+                ok_s = mid
+            else:
+                bad_s = mid
+        return self.point_at(ok_s)
+
+    def _cut(self, a: EN, b: EN, first: int, s_end_m: float) -> float:
+        """How far the segment a-b passes from the path's vertices ``first``.. (arc length below
+        ``s_end_m``): the largest of their distances to it."""
+        ax, ay = a
+        dx, dy = b[0] - ax, b[1] - ay
+        d2 = dx * dx + dy * dy
+        worst, cum = 0.0, self._cumulative
+        for i in range(first, len(cum) - 1):
+            if cum[i] >= s_end_m:
+                break
+            px, py = self.points[i]
+            t = 0.0 if d2 == 0 else min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / d2))
+            worst = max(worst, math.hypot(px - ax - t * dx, py - ay - t * dy))
+        return worst
 
 
 def _circle_polygon(center: EN, radius_m: float, segments: int, circumscribed: bool) -> Polygon:
@@ -693,7 +750,7 @@ class PathFollower:
         path = self.path
         if not path.ok:
             return Guidance(None, 0.0, math.inf, path, replan, path.error)
-        target = path.point_at(self._progress_s + self.params.lookahead_m)
+        target = path.target(position_en, self._progress_s, self.params.lookahead_m, self.params.max_corner_cut_m)
         return Guidance(target, cross_track, path.length_m - self._progress_s, path, replan)
 
     def _project(self, position_en: EN) -> float:

@@ -246,3 +246,39 @@ def test_non_finite_positions_give_an_error():
     planner = Planner(PARAMS, ROBOT, Fence(exclusion_circles=(Circle((5, 0), 1),)))
     assert "not a finite position" in planner.plan_leg((math.nan, 0.0), (10.0, 0.0)).error
     assert "not a finite position" in planner.plan_leg((0.0, 0.0), (math.inf, 0.0)).error
+
+
+def test_carrot_is_pulled_back_at_a_bend_so_the_line_to_it_stays_near_the_path():
+    path = Path(((0.0, 0.0), (10.0, 0.0), (10.0, 10.0)))
+    assert path.carrot((4.0, 0.0), 3.0, max_cut_m=0.25) == pytest.approx((7.0, 0.0))  # no bend between
+    for here in [(8.5, 0.0), (9.0, 0.0), (9.5, 0.3), (8.0, -1.0)]:
+        target = path.carrot(here, 3.0, max_cut_m=0.25)
+        cut = LineString([here, target]).distance(Point(10.0, 0.0))
+        assert cut <= 0.25 + 1e-3, (here, target, cut)
+        assert target[0] == pytest.approx(10.0) and target[1] > 0.0  # still round the corner, not at it
+    assert path.carrot((9.0, 0.0), 3.0) == pytest.approx((10.0, 2.0))  # unlimited: the plain carrot
+
+
+def test_carrot_stops_at_the_first_bend_when_nothing_beyond_it_is_in_line():
+    # A hairpin: past its first corner every point ahead is far off the straight line from here.
+    path = Path(((0.0, 0.0), (5.0, 0.0), (5.0, 0.2), (0.0, 0.2)))
+    target = path.carrot((4.0, 0.0), 3.0, max_cut_m=0.05)
+    assert math.dist(target, (5.0, 0.0)) < 0.1
+    assert path.carrot((4.0, 0.0), 3.0, max_cut_m=2.0) == pytest.approx((3.2, 0.2))  # loose: the plain carrot
+
+
+def test_follower_pulls_its_carrot_back_around_a_tight_detour():
+    """Backed off from an unseen obstacle, the rover plans round a circle blocked just ahead (the
+    stuck failsafe's re-plan): the plain 3 m carrot would have it cut through the circle, the
+    follower's carrot keeps the straight line to it within PLN_CORNER_CUT of the planned bends."""
+    params = PlannerParams()
+    planner = Planner(params, ROBOT)
+    planner.block(0.0, (0.0, 1.05), 0.6)
+    follower = PathFollower(planner, params)
+    guidance = follower.update(0.0, (0.0, 0.0), (0.0, 10.0))
+    assert guidance.path.ok and len(guidance.path.points) > 3
+    touching = Point(0.0, 1.05).buffer(0.6 + ROBOT.footprint_width_m / 2)
+    plain = guidance.path.point_at(params.lookahead_m)
+    assert LineString([(0.0, 0.0), plain]).intersects(touching)  # what the plain carrot asked for
+    line = LineString([(0.0, 0.0), guidance.target_en])
+    assert not line.intersects(touching)
