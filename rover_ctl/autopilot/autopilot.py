@@ -716,6 +716,7 @@ class Autopilot:
             max_distance_m=self.config.autopilot.arming_max_distance_m,
             sensor_rates_hz=self._sensor_rates_hz,
             min_sensor_rate_hz=self.config.failsafe.min_sensor_rate_hz,
+            planner_nodes=self.planner.node_count(fixed_only=True) if self.planner is not None else 0,
         )
 
     def _plan_rangefinders(self, present: set[int]) -> None:

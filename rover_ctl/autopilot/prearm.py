@@ -9,7 +9,9 @@ The checks:
 - estimator unhealthy (position or heading uncertainty beyond its health limits);
 - no GPS fix fused within the estimator's ``gps_timeout_s`` (a dropout or a glitch it rejects):
   armed now, the rover would start on dead reckoning;
-- a stored fence the planner cannot use (invalid geometry);
+- a stored fence the planner cannot use (invalid geometry), or one too complex for it at the
+  current PLN_CIRCLE_SEGS (more graph nodes than ``MAX_PLANNER_NODES``: uploads are checked at
+  the default, and a raised parameter would leave the rover holding with no path);
 - a rangefinder the rule base reads has not reported within ``rangefinder_timeout_s``;
 - the rover is outside an inclusion fence or inside an exclusion zone;
 - the mission's first waypoint, or the fence's nearest edge, is farther from home than
@@ -24,6 +26,7 @@ from typing import Mapping, Sequence
 
 from shapely.geometry import LinearRing, Point, Polygon
 
+from rover_ctl.mission.validate import MAX_PLANNER_NODES
 from rover_ctl.navigation.planner import Fence
 
 EN = tuple[float, float]
@@ -52,6 +55,9 @@ class ArmingInputs:
     sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
     """Odometry messages measured on the vehicle link (ATTITUDE, WHEEL_DISTANCE)."""
     min_sensor_rate_hz: float = 0.0
+    planner_nodes: int = 0
+    """Graph nodes the fence and known obstacles make for the planner (``Planner.node_count``)."""
+    max_planner_nodes: int = MAX_PLANNER_NODES
 
 
 def failures(inputs: ArmingInputs) -> list[str]:
@@ -65,6 +71,8 @@ def failures(inputs: ArmingInputs) -> list[str]:
         found.append("no recent GPS fix")
     if inputs.fence_error:
         found.append(f"fence unusable: {inputs.fence_error}")
+    if inputs.planner_nodes > inputs.max_planner_nodes:
+        found.append(f"fence too complex to plan: {inputs.planner_nodes} nodes, max {inputs.max_planner_nodes} (PLN_CIRCLE_SEGS)")
     silent = [o for o in inputs.needed_orientations if inputs.range_ages_s.get(o, math.inf) > inputs.rangefinder_timeout_s]
     if silent:
         found.append("rangefinder missing: " + ", ".join(ORIENTATION_NAMES.get(o, str(o)) for o in silent))

@@ -456,12 +456,15 @@ class Planner:
             region = inside if region is None else region.intersection(inside)
         return region, zones
 
-    def node_count(self) -> int:
+    def node_count(self, fixed_only: bool = False) -> int:
         """The graph nodes the fence, known obstacles, blocked circles and persistent obstacles
-        can make at the current ``circle_segments`` (an upper bound, see ``planner_nodes``)."""
-        circles = len(self._obstacle_circles) + len(self.fence.exclusion_circles) + len(self.fence.inclusion_circles) + len(self._blocked)
+        can make at the current ``circle_segments`` (an upper bound, see ``planner_nodes``);
+        ``fixed_only``: the fence's and known obstacles' alone (what arming checks: the others
+        come and go, and are dropped first when over the budget)."""
+        circles = len(self._obstacle_circles) + len(self.fence.exclusion_circles) + len(self.fence.inclusion_circles)
+        circles += 0 if fixed_only else len(self._blocked)
         rings = [(p, False) for p in self.fence.inclusion_polygons] + [(p, True) for p in self.fence.exclusion_polygons]
-        for shape in self._obstacle_polygons + self._persistent:
+        for shape in self._obstacle_polygons + ([] if fixed_only else self._persistent):
             for poly in _polygons(shape):  # a hole of a grown zone shrinks
                 rings += [(poly.exterior.coords[:-1], True)] + [(ring.coords[:-1], False) for ring in poly.interiors]
         return planner_nodes(circles, rings, self.params.circle_segments)

@@ -33,6 +33,7 @@ SQUARE = ((-50.0, -50.0), (50.0, -50.0), (50.0, 50.0), (-50.0, 50.0))
         ({"fence_error": "fence item 0: circle radius 0"}, "fence unusable: fence item 0: circle radius 0"),
         ({"sensor_rates_hz": {"ATTITUDE": 10.0, "WHEEL_DISTANCE": 2.5}, "min_sensor_rate_hz": 4.0},
          "link too slow: WHEEL_DISTANCE 2.5 Hz < 4 Hz"),
+        ({"planner_nodes": 2560, "max_planner_nodes": 800}, "fence too complex to plan: 2560 nodes, max 800 (PLN_CIRCLE_SEGS)"),
     ],
 )
 def test_each_check_names_its_reason(change, reason):
