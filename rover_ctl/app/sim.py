@@ -51,6 +51,7 @@ from rover_ctl.config import GcsParams, load_config  # noqa: E402
 from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
 from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
 from rover_ctl.mavlink.signing import KeyStore  # noqa: E402
+from rover_ctl.mavlink.telemetry import StatusTextAssembler  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
 from rover_ctl.mission.model import Mission  # noqa: E402
 from rover_ctl.mission.summary import nominal_duration_s  # noqa: E402
@@ -240,6 +241,7 @@ class SimRun:
         self.frame = LocalFrame(self.home.lat_deg, self.home.lon_deg, self.home_alt_m) if self.home else None
         self.targets = {seq: (item.x, item.y) for seq, item in enumerate(self.mission.items, 1) if item.is_global and (item.x or item.y)}
         self.progress = Progress(waypoints_total=sum(i.command in NAV_COMMANDS for i in self.mission.items))
+        self._texts = StatusTextAssembler()
         self.world_path: Path | None = options.world
         self.sitl: SitlProcess | None = None
         self.daemon: subprocess.Popen | None = None
@@ -535,8 +537,10 @@ class SimRun:
         elif kind == "MISSION_ITEM_REACHED":
             p.reached.add(msg.seq)
         elif kind == "STATUSTEXT":
-            p.last_text = msg.text
-            p.texts.append(msg.text)
+            text = self._texts.add(msg)
+            if text is not None:
+                p.last_text = text
+                p.texts.append(text)
 
     def wait_for(self, predicate: Callable[[Progress], bool], sim_timeout_s: float | None = None,
                  wall_timeout_s: float | None = None, on_tick: Callable[[Progress], None] | None = None) -> bool:  # fmt: skip

@@ -162,3 +162,30 @@ class Telemetry:
             chunks.append(b"")  # a full last chunk needs an empty one to end the text
         for index, chunk in enumerate(chunks):
             self.conn.mav.statustext_send(severity, chunk, self._statustext_id, index)
+
+
+class StatusTextAssembler:
+    """Whole texts from STATUSTEXT messages, as ground stations show them: a text longer than one
+    message comes in chunks sharing a nonzero ``id`` (``chunk_seq`` 0, 1, ...); a chunk shorter than
+    ``STATUSTEXT_CHUNK`` bytes (an empty one after a full last chunk) ends it. ``id`` 0 is a whole
+    text. At most ``pending`` texts are assembled at once (the oldest is given up), so a sender
+    that never ends its texts costs bounded memory."""
+
+    def __init__(self, pending: int = 8) -> None:
+        self._parts: dict[int, list[str]] = {}
+        self._pending = pending
+
+    def add(self, msg: Any) -> str | None:
+        """The whole text ``msg`` ends, or None while a chunked text is incomplete."""
+        text = msg.text if isinstance(msg.text, str) else msg.text.decode("utf-8", "replace")
+        text_id = getattr(msg, "id", 0)
+        if not text_id:
+            return text
+        parts = self._parts.pop(text_id, [])  # re-inserted last: the dict's order is the age
+        parts.append(text)
+        if len(text.encode("utf-8")) < STATUSTEXT_CHUNK:
+            return "".join(parts)
+        self._parts[text_id] = parts
+        while len(self._parts) > self._pending:
+            del self._parts[next(iter(self._parts))]
+        return None

@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from rover_ctl.config import GcsParams
 from rover_ctl.mavlink.commands import CAPABILITIES
 from rover_ctl.mavlink.gcs import DefaultHandlers, GcsLink
+from rover_ctl.mavlink.telemetry import StatusTextAssembler
 from rover_ctl.vocabulary import RoverMode
 from rover_ctl.mavlink.mission_client import MissionClient, MissionClientError
 from rover_ctl.mission.model import Mission
@@ -252,8 +253,23 @@ def test_long_statustext_is_chunked(url, udp_port):
         assert len({c.id for c in chunks}) == 1 and chunks[0].id > 0
         assert [c.chunk_seq for c in chunks] == [0, 1, 2]
         assert "".join(c.text for c in chunks) == text
+        assembler = StatusTextAssembler()
+        assert [assembler.add(c) for c in chunks] == [None, None, text]
+        link.send_statustext("a" * 50, mav.MAV_SEVERITY_INFO)  # one full message, id 0: whole as it is
+        assert assembler.add(expect(conn, "STATUSTEXT")) == "a" * 50
+        link.send_statustext("b" * 100, mav.MAV_SEVERITY_INFO)  # two full chunks and an empty one to end
+        assert [assembler.add(expect(conn, "STATUSTEXT")) for _ in range(3)] == [None, None, "b" * 100]
     finally:
         link.close()
+
+
+def test_the_assembler_keeps_a_bounded_number_of_unfinished_texts():
+    assembler = StatusTextAssembler(pending=2)
+    chunk = lambda text_id, text: mav.MAVLink_statustext_message(mav.MAV_SEVERITY_INFO, text.encode(), text_id, 0)  # noqa: E731
+    for text_id in (1, 2, 3):  # never ended
+        assert assembler.add(chunk(text_id, "x" * 50)) is None
+    assert assembler.add(chunk(1, "end")) == "end"  # id 1, the oldest, was given up
+    assert assembler.add(chunk(3, "end")) == "x" * 50 + "end"
 
 
 
