@@ -21,9 +21,12 @@ JUMP = ROOT / "missions" / "cmac_jump.waypoints"
 HOME = (-35.363261, 149.165230, 584.0)
 NEAR_M = 3.0
 """Arrival within the acceptance radius (2 m) of the daemon's estimate, each about a metre off truth."""
-TRUTH_NEAR_M = 4.0
+TRUTH_NEAR_M = 5.0
 """Where the rover stands at the end, by truth: within the acceptance radius of the estimate (2 m),
-plus the estimate's error against truth (the emulator's GPS: up to about 1.5 m), plus braking."""
+plus the estimate's error against truth, plus braking. The emulator's GPS has a 1.0 m bias per
+axis that wanders (tau 120 s); the fused estimate's error is 1.04 m RMS (docs/BENCHMARKS.md,
+"Pose estimator"), so three times that is 3.1 m. The bound was 4.0 until a suite run ended 4.31 m
+off (the estimate was within the acceptance radius)."""
 
 pytestmark = pytest.mark.sitl
 
