@@ -14,7 +14,8 @@ import os
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402  (MAVLINK20 first)
 
-__all__ = ["ARM_FORCE_MAGIC", "Cmd", "MissionState", "MissionType", "RoverMode", "Severity", "mav"]
+__all__ = ["ARM_FORCE_MAGIC", "Cmd", "MissionState", "MissionType", "PILOT_STEER_TYPE", "RoverMode", "STEER_UNCHANGED_WHEN_REVERSING",
+           "Severity", "mav"]
 
 
 class RoverMode(enum.IntEnum):
@@ -100,3 +101,14 @@ class Cmd(enum.IntEnum):
 
 ARM_FORCE_MAGIC = 21196
 """param2 of MAV_CMD_COMPONENT_ARM_DISARM that forces arming/disarming (MAVLink spec, ArduPilot)."""
+
+PILOT_STEER_TYPE = "PILOT_STEER_TYPE"
+"""ArduPilot Rover's parameter for how the pilot's steering is read in reverse. At 0 (its default)
+and 2 the steering is reversed while the throttle output -- slew-limited by MOT_SLEWRATE -- is
+negative (``Mode::get_pilot_desired_steering_and_throttle``): the RC overrides of the daemon's
+wheel control, whose inverse mixer assumes left = throttle + steering always, then turn the rover
+the wrong way whenever the throttle is negative, and in a pivot (throttle near 0, either sign)
+the rover can swing between the two ways and never finish the turn. The daemon reads it at
+connect and refuses to arm unless it is STEER_UNCHANGED_WHEN_REVERSING (docs/ardupilot.md)."""
+STEER_UNCHANGED_WHEN_REVERSING = 3
+"""PILOT_STEER_TYPE 3: "direction unchanged when backing up" (no reversal at any throttle)."""

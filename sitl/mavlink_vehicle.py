@@ -63,6 +63,11 @@ class LinkParams:
     """[RC_OVERRIDE_TIME] an override not refreshed for this long is released (ArduPilot default 3 s)."""
     arming_check: int = 1
     """[ARMING_CHECK] 1: require a 3D GPS fix to arm (ArduPilot Rover does not in MANUAL; 0 = as ArduPilot)."""
+    pilot_steer_type: int = 3
+    """[PILOT_STEER_TYPE] read-only 3, "direction unchanged when backing up": the mixer (``sitl.mixer``)
+    never reverses the steering. ArduPilot's default, 0, reverses it while the slew-limited
+    throttle output is negative, which this emulator does not model; a daemon driving ArduPilot
+    needs 3 and checks it (docs/ardupilot.md)."""
     rates_hz: dict[str, float] = field(default_factory=lambda: {
         "HEARTBEAT": 1.0, "GPS_RAW_INT": 5.0, "ATTITUDE": 50.0, "DISTANCE_SENSOR": 20.0,
         "WHEEL_DISTANCE": 50.0, "SERVO_OUTPUT_RAW": 10.0, "SYS_STATUS": 1.0, "SIMSTATE": 10.0,
@@ -70,11 +75,13 @@ class LinkParams:
     """Default telemetry rates in sim time (the architecture's table)."""
 
 
-PARAM_NAMES = {"SYSID_MYGCS": "sysid_mygcs", "RC_OVERRIDE_TIME": "rc_override_time_s", "ARMING_CHECK": "arming_check"}
-PARAM_RANGES = {"SYSID_MYGCS": (1, 255), "RC_OVERRIDE_TIME": (-1.0, 120.0), "ARMING_CHECK": (0, 2**31 - 1)}
+PARAM_NAMES = {"SYSID_MYGCS": "sysid_mygcs", "RC_OVERRIDE_TIME": "rc_override_time_s", "ARMING_CHECK": "arming_check",
+               "PILOT_STEER_TYPE": "pilot_steer_type"}  # fmt: skip
+PARAM_RANGES = {"SYSID_MYGCS": (1, 255), "RC_OVERRIDE_TIME": (-1.0, 120.0), "ARMING_CHECK": (0, 2**31 - 1),
+                "PILOT_STEER_TYPE": (3, 3)}  # fmt: skip
 """ArduPilot's ranges; an int bound: whole numbers. RC_OVERRIDE_TIME -1: overrides never time out,
 0: overrides off. ARMING_CHECK is ArduPilot's bitmask of checks: any bit set turns on the
-emulator's one check (a 3D fix), 0 turns it off."""
+emulator's one check (a 3D fix), 0 turns it off. PILOT_STEER_TYPE: only 3, the mixer's behaviour."""
 
 
 def check_link_param(name: str, value) -> float:
@@ -115,6 +122,7 @@ class MavlinkVehicle:
         self.sysid_mygcs = params.sysid_mygcs
         self.rc_override_time_s = params.rc_override_time_s
         self.arming_check = params.arming_check
+        self.pilot_steer_type = params.pilot_steer_type
         self.armed = False
         self.mode = MODE_MANUAL
         self.overrides: dict[int, tuple[int, float]] = {}

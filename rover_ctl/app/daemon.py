@@ -49,7 +49,7 @@ from rover_ctl.mavlink import budget
 from rover_ctl.mavlink.budget import StreamPlan
 from rover_ctl.mavlink.commands import ACK_LATER
 from rover_ctl.mavlink.gcs import ConfigParams, GcsLink, VehicleState
-from rover_ctl.mavlink.vehicle import NO_ANSWER, PYMAVLINK_DEFAULT_BAUD, Battery, CommandResult, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleStatus
+from rover_ctl.mavlink.vehicle import NO_ANSWER, PYMAVLINK_DEFAULT_BAUD, Battery, CommandResult, FrameMarker, LinkError, StatusText as VehicleText, VehicleLink, VehicleParam, VehicleStatus
 from rover_ctl.mavlink.signing import KeyStore
 from rover_ctl.mission.model import Home, Mission
 from rover_ctl.mission.store import MissionStore
@@ -384,6 +384,9 @@ class Daemon:
             self._arm_accepted = None
         elif isinstance(item, Battery):
             self.battery = item
+        elif isinstance(item, VehicleParam):
+            log.info("vehicle parameter %s = %g", item.name, item.value)
+            self.autopilot.on_vehicle_param(item.name, item.value)
         elif isinstance(item, VehicleText):
             log.info("vehicle: %s", item.text)
             self.events.write(item.time_s, "statustext", text=item.text, severity=item.severity, source="vehicle")

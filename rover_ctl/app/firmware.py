@@ -33,6 +33,7 @@ from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from rover_ctl.app.sim import STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
+from rover_ctl.vocabulary import PILOT_STEER_TYPE, STEER_UNCHANGED_WHEN_REVERSING
 from sitl.launch import free_port, line_relay, signals_held, stop_process
 
 SHARED_DIR = Path(os.environ.get("ROVER_CTL_SHARED") or Path(__file__).resolve().parents[2].parent / "shared")
@@ -87,10 +88,12 @@ def lower_priority(pid: int, nice: int) -> None:
 
 
 def extra_params(rangefinders: tuple[int, ...], wheel_encoders: bool = True) -> dict[str, float]:
-    """The documented parameters on top of the stock files: encoders and one simulated
+    """The documented parameters on top of the stock files: PILOT_STEER_TYPE 3 (the steering never
+    reversed in reverse, which the daemon's pre-arm check requires), encoders and one simulated
     rangefinder per orientation (``RNGFNDn_TYPE 100`` = SITL, ``SIM_SONAR_ROT 0`` so each one
     follows its own ``RNGFNDn_ORIENT``)."""
-    params: dict[str, float] = dict(WHEEL_ENCODERS) if wheel_encoders else {}
+    params: dict[str, float] = {PILOT_STEER_TYPE: STEER_UNCHANGED_WHEN_REVERSING}
+    params |= dict(WHEEL_ENCODERS) if wheel_encoders else {}
     if rangefinders:
         params["SIM_SONAR_ROT"] = 0
     for n, orientation in enumerate(rangefinders, 1):

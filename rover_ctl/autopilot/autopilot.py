@@ -173,6 +173,8 @@ class Autopilot:
         self.mission = Mission()
         self.fence = Fence()
         self.fence_error: str | None = None
+        self.vehicle_params: dict[str, float] = {}
+        """What the vehicle's autopilot answered for the parameters the daemon reads at connect."""
         self.planner: Planner | None = None
         self.follower: PathFollower | None = None
         self.executor: MissionExecutor | None = None
@@ -210,6 +212,15 @@ class Autopilot:
 
     def on_vehicle(self, armed: bool) -> None:
         self.armed = armed
+
+    def on_vehicle_param(self, name: str, value: float) -> None:
+        """A parameter of the vehicle's own autopilot (``rover_ctl.mavlink.vehicle.VEHICLE_PARAMS``),
+        for the pre-arm checks; a wrong one is said at once, not only when arming is refused."""
+        known = self.vehicle_params.get(name)
+        self.vehicle_params[name] = value
+        reason = prearm.vehicle_param_problem(name, value)
+        if reason is not None and known != value:
+            self._say(f"Vehicle {reason}", Severity.CRITICAL)
 
     def on_wheels(self, reading: WheelDistance) -> None:
         self._sensor_seen(reading.time_s)
@@ -717,6 +728,7 @@ class Autopilot:
             sensor_rates_hz=self._sensor_rates_hz,
             min_sensor_rate_hz=self.config.failsafe.min_sensor_rate_hz,
             planner_nodes=self.planner.node_count(fixed_only=True) if self.planner is not None else 0,
+            vehicle_params=dict(self.vehicle_params),
         )
 
     def _plan_rangefinders(self, present: set[int]) -> None:

@@ -15,7 +15,11 @@ The checks:
 - a rangefinder the rule base reads has not reported within ``rangefinder_timeout_s``;
 - the rover is outside an inclusion fence or inside an exclusion zone;
 - the mission's first waypoint, or the fence's nearest edge, is farther from home than
-  ``AutopilotParams.arming_max_distance_m``: a plan made for another place.
+  ``AutopilotParams.arming_max_distance_m``: a plan made for another place;
+- the vehicle's autopilot is configured against the daemon's RC overrides: an ArduPilot
+  PILOT_STEER_TYPE other than 3 reverses the steering whenever its throttle output is negative
+  (``rover_ctl.vocabulary.PILOT_STEER_TYPE``). Checked once the vehicle has answered (only an
+  ArduPilot vehicle is asked).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from shapely.geometry import LinearRing, Point, Polygon
 
 from rover_ctl.mission.validate import MAX_PLANNER_NODES
 from rover_ctl.navigation.planner import Fence
+from rover_ctl.vocabulary import PILOT_STEER_TYPE, STEER_UNCHANGED_WHEN_REVERSING
 
 EN = tuple[float, float]
 
@@ -55,6 +60,8 @@ class ArmingInputs:
     sensor_rates_hz: Mapping[str, float] = field(default_factory=dict)
     """Odometry messages measured on the vehicle link (ATTITUDE, WHEEL_DISTANCE)."""
     min_sensor_rate_hz: float = 0.0
+    vehicle_params: Mapping[str, float] = field(default_factory=dict)
+    """The vehicle autopilot's parameters read at connect (absent: not answered, not checked)."""
     planner_nodes: int = 0
     """Graph nodes the fence and known obstacles make for the planner (``Planner.node_count``)."""
     max_planner_nodes: int = MAX_PLANNER_NODES
@@ -90,7 +97,18 @@ def failures(inputs: ArmingInputs) -> list[str]:
     distance = fence_distance_m(inputs.fence, (0.0, 0.0))
     if distance is not None and distance > inputs.max_distance_m:
         found.append(f"fence {distance:.0f} m from home")
+    for name, value in sorted(inputs.vehicle_params.items()):
+        problem = vehicle_param_problem(name, value)
+        if problem is not None:
+            found.append(f"vehicle {problem}")
     return found
+
+
+def vehicle_param_problem(name: str, value: float) -> str | None:
+    """Why the vehicle's parameter ``name`` at ``value`` keeps the daemon from driving it, or None."""
+    if name == PILOT_STEER_TYPE and value != STEER_UNCHANGED_WHEN_REVERSING:
+        return f"{name} {value:g} reverses steering in reverse: set {STEER_UNCHANGED_WHEN_REVERSING}"
+    return None
 
 
 def fence_violation(fence: Fence, point_en: EN) -> str | None:

@@ -5,7 +5,8 @@ It owns one pymavlink connection (serial, udp or tcp connection string) and does
 * identify itself as a ground station (HEARTBEAT as MAV_TYPE_GCS with the system id the vehicle
   accepts RC overrides from, ArduPilot's MAV_GCS_SYSID, formerly SYSID_MYGCS, 255 by default),
   find the vehicle's heartbeat and ask for its AUTOPILOT_VERSION (which tells rover-sitl in
-  lockstep from anything else, see "Time sync" below);
+  lockstep from anything else, see "Time sync" below) and, from an ArduPilot vehicle, the
+  parameters the pre-arm checks need (``VEHICLE_PARAMS``: PILOT_STEER_TYPE);
 * ask for the message rates of the daemon's link budget and nothing else
   (``rover_ctl.mavlink.budget``: every stream off, EXTRA1 for WHEEL_DISTANCE, which ArduPilot
   only sends in that stream, SET_MESSAGE_INTERVAL per other message), and measure what arrives
@@ -34,6 +35,7 @@ link housekeeping (heartbeats, command retries, silence detection).
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections import deque
 import math
 import os
@@ -49,11 +51,15 @@ from rover_ctl.config import LinkParams  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from rover_ctl.mavlink import budget  # noqa: E402
 from rover_ctl.mavlink.link_health import LinkHealth  # noqa: E402
+from rover_ctl.mavlink.telemetry import StatusTextAssembler  # noqa: E402
 # The dialect module itself, not mavutil.mavlink: that is whichever dialect was current when this
 # module was imported (MAVLink 1's "all" if gcs.py, say, imported mavutil before MAVLINK20 was set).
+from rover_ctl.vocabulary import PILOT_STEER_TYPE  # noqa: E402
 from rover_ctl.vocabulary import mav as mavlink  # noqa: E402
 
 UINT16_MAX = 65535
+log = logging.getLogger(__name__)
+
 RC_RELEASE = 0
 """RC_CHANNELS_OVERRIDE channels 1-8: 0 hands the channel back to the radio, UINT16_MAX leaves it."""
 EPOCH_THRESHOLD_US = 10**15
@@ -76,10 +82,25 @@ NO_ANSWER = -1
 """``CommandResult.result`` of a command no COMMAND_ACK answered after all retries."""
 MAX_COMMAND_WAITERS = 8
 """Callers one outstanding command answers (a repeat of it joins them instead of being sent)."""
+VEHICLE_PARAMS = (PILOT_STEER_TYPE,)
+"""ArduPilot parameters read from the vehicle at connect (PARAM_REQUEST_READ, answered by
+PARAM_VALUE), for the pre-arm checks; only an ArduPilot vehicle is asked."""
+PARAM_READ_PERIOD_S = 1.0
+"""Wall seconds between two PARAM_REQUEST_READs of a parameter not answered yet."""
+PARAM_READ_TRIES = 10
+"""Requests per parameter before the daemon stops asking (and the check it feeds is skipped)."""
 
 
 class LinkError(RuntimeError):
     """The vehicle link cannot do what was asked (no vehicle, command refused or unanswered)."""
+
+
+@dataclass(frozen=True)
+class VehicleParam:
+    """A PARAM_VALUE of the vehicle for one of VEHICLE_PARAMS."""
+
+    name: str
+    value: float
 
 
 @dataclass(frozen=True)
@@ -291,6 +312,10 @@ class VehicleLink:
         """TIMESYNC requests answered as plain time sync (ArduPilot's latency probe)."""
         self.readings_dropped = 0
         """Stale sensor readings skipped because newer ones of the same kind came in the same batch."""
+        self._texts = StatusTextAssembler()
+        self._param_reads: dict[str, int] = {}
+        """VEHICLE_PARAMS not answered yet -> requests sent (asked from the first ArduPilot heartbeat)."""
+        self._next_param_read_s = 0.0
 
     # ---- receiving -------------------------------------------------------------------------
 
@@ -450,6 +475,8 @@ class VehicleLink:
             self.target_system, self.target_component = msg.get_srcSystem(), msg.get_srcComponent()
             if first:
                 self.command_async(mavlink.MAV_CMD_REQUEST_MESSAGE, float(mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION))
+                if msg.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
+                    self._param_reads, self._next_param_read_s = dict.fromkeys(VEHICLE_PARAMS, 0), 0.0
             self.vehicle = VehicleStatus(
                 wall_s=self.last_rx_wall_s,
                 armed=bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED),
@@ -457,6 +484,12 @@ class VehicleLink:
                 system_status=msg.system_status,
             )
             return self.vehicle
+        if kind == "PARAM_VALUE":
+            name = msg.param_id
+            if name not in VEHICLE_PARAMS or not math.isfinite(msg.param_value):
+                return None  # another ground station's traffic, or a value no check can use
+            self._param_reads.pop(name, None)
+            return VehicleParam(name, float(msg.param_value))
         if kind == "ATTITUDE":
             self._advance(msg.time_boot_ms / 1000.0)
             return Attitude(time_s=msg.time_boot_ms / 1000.0, yaw_rad=msg.yaw, yaw_rate_radps=msg.yawspeed)
@@ -479,7 +512,8 @@ class VehicleLink:
         if kind == "SIMSTATE":
             return Truth(self.vehicle_time_s, msg.lat / 1e7, msg.lng / 1e7, msg.yaw)
         if kind == "STATUSTEXT":
-            return StatusText(self.vehicle_time_s, msg.severity, msg.text)
+            text = self._texts.add(msg)  # ArduPilot sends a long text in chunks: passed on whole
+            return None if text is None else StatusText(self.vehicle_time_s, msg.severity, text)
         if kind == "COMMAND_ACK":
             return self._on_ack(msg)
         if kind == "AUTOPILOT_VERSION":
@@ -526,6 +560,19 @@ class VehicleLink:
                 self._send_queued(pending.command, now)
                 continue
             self._send_command(pending, now)
+        if self._param_reads and now >= self._next_param_read_s:
+            self._read_params(now)
+
+    def _read_params(self, now: float) -> None:
+        """Ask for each VEHICLE_PARAMS value not answered yet, at most PARAM_READ_TRIES times."""
+        for name, tries in list(self._param_reads.items()):
+            if tries >= PARAM_READ_TRIES:
+                del self._param_reads[name]
+                log.warning("vehicle link: no answer to PARAM_REQUEST_READ %s after %d tries", name, tries)
+                continue
+            self.conn.mav.param_request_read_send(self.target_system, self.target_component, name.encode(), -1)
+            self._param_reads[name] = tries + 1
+        self._next_param_read_s = now + PARAM_READ_PERIOD_S
 
     def send_override(self, steering_us: int, throttle_us: int) -> None:
         """RC_CHANNELS_OVERRIDE: ch1 steering, ch3 throttle; the other channels released."""

@@ -194,3 +194,39 @@ def _events(out: Path) -> list[dict]:
     from rover_ctl.app.report import read_jsonl
 
     return read_jsonl(out / "events.jsonl")
+
+
+def _sharp_turns(path: Path) -> Path:
+    """Four turns of 140-170 degrees from CMAC: each one a pivot with the throttle near zero."""
+    home = MISSION.read_text().splitlines()[1]
+    frame = LocalFrame(*(float(v) for v in home.split("\t")[8:11]))
+    lines = ["QGC WPL 110", home]
+    for seq, (east_m, north_m) in enumerate([(0.0, 12.0), (2.0, 1.0), (14.0, 8.0), (1.0, 10.0), (12.0, 0.0)], 1):
+        lat, lon = frame.to_geodetic(east_m, north_m)
+        lines.append(f"{seq}\t0\t3\t16\t0\t0\t0\t0\t{lat:.7f}\t{lon:.7f}\t0\t1")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_pivots_through_sharp_turns_at_10x(tmp_path):
+    """With PILOT_STEER_TYPE 3 the firmware keeps the steering's sign whatever the throttle's, so a
+    pivot whose wheel loop dips the throttle below zero still turns the way it was asked. At the
+    stock 0 the same mission never finished: the steering flipped whenever the slew-limited throttle
+    went negative, and the rover swung between the two ways at the fourth turn until the timeout."""
+    options = FirmwareOptions(mission=_sharp_turns(tmp_path / "turns.waypoints"), out=tmp_path / "run", lockstep=False,
+                              speedup=10, timeout_s=150.0, rangefinders="none", config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
+    metrics = simulate_firmware(options)
+    assert metrics["complete"] and metrics["reached_seqs"] == [1, 2, 3, 4, 5], metrics
+
+
+def test_stock_pilot_steer_type_refuses_arming_and_says_what_to_set(tmp_path):
+    options = FirmwareOptions(mission=MISSION, out=tmp_path / "run", lockstep=False, speedup=10, rangefinders="none",
+                              params={"PILOT_STEER_TYPE": 0}, config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
+    with FirmwareRun(options) as run:
+        assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
+        assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, 0) == mav.MAV_RESULT_FAILED
+        reason = "PILOT_STEER_TYPE 0 reverses steering in reverse: set 3"
+        assert run.wait_for(lambda p: f"PreArm: vehicle {reason}" in p.texts, wall_timeout_s=5.0), run.progress.texts
+    events = _events(tmp_path / "run")
+    said = next(e["t_s"] for e in events if e.get("text") == f"Vehicle {reason}")
+    assert said < next(e["t_s"] for e in events if e["type"] == "arm_request" or e.get("text", "").startswith("PreArm"))  # at connect

@@ -34,6 +34,8 @@ SQUARE = ((-50.0, -50.0), (50.0, -50.0), (50.0, 50.0), (-50.0, 50.0))
         ({"sensor_rates_hz": {"ATTITUDE": 10.0, "WHEEL_DISTANCE": 2.5}, "min_sensor_rate_hz": 4.0},
          "link too slow: WHEEL_DISTANCE 2.5 Hz < 4 Hz"),
         ({"planner_nodes": 2560, "max_planner_nodes": 800}, "fence too complex to plan: 2560 nodes, max 800 (PLN_CIRCLE_SEGS)"),
+        ({"vehicle_params": {"PILOT_STEER_TYPE": 0.0}}, "vehicle PILOT_STEER_TYPE 0 reverses steering in reverse: set 3"),
+        ({"vehicle_params": {"PILOT_STEER_TYPE": 2.0}}, "vehicle PILOT_STEER_TYPE 2 reverses steering in reverse: set 3"),
     ],
 )
 def test_each_check_names_its_reason(change, reason):

@@ -13,7 +13,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rover_ctl.config import LinkParams  # noqa: E402
-from rover_ctl.mavlink.vehicle import (MAX_COMMAND_WAITERS, CommandResult, FrameMarker, LinkError, VehicleLink, VehicleStatus,  # noqa: E402
+from rover_ctl.mavlink.vehicle import (MAX_COMMAND_WAITERS, PARAM_READ_PERIOD_S, PARAM_READ_TRIES, CommandResult, FrameMarker,  # noqa: E402
+                                      LinkError, StatusText as VehicleText, VehicleLink, VehicleParam, VehicleStatus,  # noqa: E402
                                       VehicleVersion, decode_range)  # noqa: E402
 from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance  # noqa: E402
 from support import free_port  # noqa: E402
@@ -359,3 +360,39 @@ def test_a_read_holding_only_part_of_a_frame_is_no_error(pair):
     assert [i for i in link.poll() if isinstance(i, Attitude)] == []
     vehicle.write(frame[10:])
     assert drain(link, Attitude).time_s == 4.0
+
+
+def test_an_ardupilot_vehicle_is_asked_for_its_steering_type_until_it_answers(pair):
+    link, vehicle, clock = pair
+    request = receive(vehicle, "PARAM_REQUEST_READ")  # sent with the first heartbeat's tick
+    assert (request.param_id, request.param_index, request.target_system) == ("PILOT_STEER_TYPE", -1, 1)
+    clock.t += PARAM_READ_PERIOD_S
+    link.tick()
+    receive(vehicle, "PARAM_REQUEST_READ")  # not answered: asked again a period later
+    vehicle.mav.param_value_send(b"SOMETHING_ELSE", 1.0, mav.MAV_PARAM_TYPE_REAL32, 900, 1)  # another GCS's
+    vehicle.mav.param_value_send(b"PILOT_STEER_TYPE", 0.0, mav.MAV_PARAM_TYPE_INT8, 900, 2)
+    assert drain(link, VehicleParam) == VehicleParam("PILOT_STEER_TYPE", 0.0)
+    clock.t += PARAM_READ_PERIOD_S
+    link.tick()
+    assert vehicle.recv_match(type="PARAM_REQUEST_READ", blocking=True, timeout=0.3) is None  # answered: no more
+
+
+def test_an_unanswered_parameter_read_stops_after_its_tries(pair):
+    link, vehicle, clock = pair
+    asked = 0
+    for _ in range(PARAM_READ_TRIES + 3):
+        while vehicle.recv_match(type="PARAM_REQUEST_READ", blocking=True, timeout=0.1) is not None:
+            asked += 1
+        clock.t += PARAM_READ_PERIOD_S
+        link.tick()
+    assert asked == PARAM_READ_TRIES
+
+
+def test_a_long_vehicle_text_in_chunks_is_one_text(pair):
+    link, vehicle, _ = pair
+    text = "PreArm: Hardware safety switch; Battery 1 below minimum arming voltage"
+    data = text.encode()
+    vehicle.mav.statustext_send(mav.MAV_SEVERITY_CRITICAL, data[:50], 7, 0)
+    vehicle.mav.statustext_send(mav.MAV_SEVERITY_CRITICAL, data[50:], 7, 1)
+    item = drain(link, VehicleText)
+    assert (item.text, item.severity) == (text, mav.MAV_SEVERITY_CRITICAL)
