@@ -69,7 +69,7 @@ def run(quick: bool) -> dict:
         "|---|---|---|---|---|---|---|---|",
         *rows,
         "",
-        "Firmware: ArduPilot Rover 4.7-dev SITL `rover-skid`, stock parameters + WENC/RNGFND (docs/ardupilot.md), "
+        "Firmware: ArduPilot Rover 4.7-dev SITL `rover-skid`, stock parameters + PILOT_STEER_TYPE 3 + WENC/RNGFND (docs/ardupilot.md), "
         "free running at the speed-up shown; the daemon follows its timestamps. Emulator: rover-sitl in lockstep. "
         "Control rate is control steps per second of vehicle time during the mission (target 25 Hz); below it the "
         "daemon could not keep up with the firmware at that speed-up on this machine (2 cores shared with the firmware "

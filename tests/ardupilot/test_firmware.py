@@ -43,9 +43,10 @@ gave 0.58 m of cross-track in the benchmark (docs/BENCHMARKS.md) and 3.0 m in on
 TIMEOUT_S = 400.0
 RUNAWAY_RATIO = 3.0
 """At 50x: the path driven against the emulator's. The runaway this guards against drove 835 m for
-a 180 m mission (4.6x). Measured since: 182-210 m alone, 389-427 m (2.3-2.5x) with a second
-firmware run on the other core: the wheel-speed loop at 5-6 Hz on ArduPilot's faster motor model
-oscillates (docs/sitl.md, "Emulator vs ArduPilot's firmware")."""
+a 180 m mission (4.6x). Measured at the firmware's stock PILOT_STEER_TYPE 0: 182-210 m alone,
+389-427 m (2.3-2.5x) with a second firmware run on the other core, the rover swinging in its turns
+(the steering reversed whenever the throttle went negative). With 3 (docs/ardupilot.md), the
+benchmark's 50x run drove 171.8 m against the emulator's 169.2 m (docs/BENCHMARKS.md)."""
 SLOW_LOOP_TIMEOUT_S = 1500.0
 """At 50x the loop may fall to a few hertz of vehicle time, and the speed with it (SCHED_STEP_TRVL
 per step: 0.3 m/s at 3 Hz); 1500 s of the firmware's time is 30 s of wall time."""
