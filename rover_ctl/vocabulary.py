@@ -14,8 +14,8 @@ import os
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402  (MAVLINK20 first)
 
-__all__ = ["ARM_FORCE_MAGIC", "Cmd", "MissionState", "MissionType", "PILOT_STEER_TYPE", "RoverMode", "STEER_UNCHANGED_WHEN_REVERSING",
-           "Severity", "mav"]
+__all__ = ["ARM_FORCE_MAGIC", "Cmd", "MissionState", "MissionType", "PILOT_STEER_TYPE", "RoverMode", "STEER_TWO_PADDLES",
+           "STEER_UNCHANGED_WHEN_REVERSING", "Severity", "mav"]
 
 
 class RoverMode(enum.IntEnum):
@@ -112,3 +112,5 @@ the rover can swing between the two ways and never finish the turn. The daemon r
 connect and refuses to arm unless it is STEER_UNCHANGED_WHEN_REVERSING (docs/ardupilot.md)."""
 STEER_UNCHANGED_WHEN_REVERSING = 3
 """PILOT_STEER_TYPE 3: "direction unchanged when backing up" (no reversal at any throttle)."""
+STEER_TWO_PADDLES = 1
+"""PILOT_STEER_TYPE 1: channels 1 and 3 are the left and right paddles, not steering and throttle."""

@@ -32,7 +32,7 @@ from shapely.geometry import LinearRing, Point, Polygon
 
 from rover_ctl.mission.validate import MAX_PLANNER_NODES
 from rover_ctl.navigation.planner import Fence
-from rover_ctl.vocabulary import PILOT_STEER_TYPE, STEER_UNCHANGED_WHEN_REVERSING
+from rover_ctl.vocabulary import PILOT_STEER_TYPE, STEER_TWO_PADDLES, STEER_UNCHANGED_WHEN_REVERSING
 
 EN = tuple[float, float]
 
@@ -107,7 +107,8 @@ def failures(inputs: ArmingInputs) -> list[str]:
 def vehicle_param_problem(name: str, value: float) -> str | None:
     """Why the vehicle's parameter ``name`` at ``value`` keeps the daemon from driving it, or None."""
     if name == PILOT_STEER_TYPE and value != STEER_UNCHANGED_WHEN_REVERSING:
-        return f"{name} {value:g} reverses steering in reverse: set {STEER_UNCHANGED_WHEN_REVERSING}"
+        how = "reads steering and throttle as two paddles" if value == STEER_TWO_PADDLES else "reverses steering in reverse"
+        return f"{name} {value:g} {how}: set {STEER_UNCHANGED_WHEN_REVERSING}"
     return None
 
 

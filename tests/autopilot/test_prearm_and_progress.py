@@ -36,6 +36,7 @@ SQUARE = ((-50.0, -50.0), (50.0, -50.0), (50.0, 50.0), (-50.0, 50.0))
         ({"planner_nodes": 2560, "max_planner_nodes": 800}, "fence too complex to plan: 2560 nodes, max 800 (PLN_CIRCLE_SEGS)"),
         ({"vehicle_params": {"PILOT_STEER_TYPE": 0.0}}, "vehicle PILOT_STEER_TYPE 0 reverses steering in reverse: set 3"),
         ({"vehicle_params": {"PILOT_STEER_TYPE": 2.0}}, "vehicle PILOT_STEER_TYPE 2 reverses steering in reverse: set 3"),
+        ({"vehicle_params": {"PILOT_STEER_TYPE": 1.0}}, "vehicle PILOT_STEER_TYPE 1 reads steering and throttle as two paddles: set 3"),
     ],
 )
 def test_each_check_names_its_reason(change, reason):
