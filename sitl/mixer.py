@@ -1,7 +1,9 @@
 """ArduPilot Rover's MANUAL-mode skid-steer mixer: RC steering/throttle PWM -> left/right motor PWM.
 
 It reproduces the chain a real skid-steer ArduPilot rover applies, so that a controller tuned
-against this emulator sees the same outputs on a real vehicle:
+against this emulator sees the same outputs on a real vehicle, as configured for the daemon
+(PILOT_STEER_TYPE 3: the steering keeps its sign at any throttle; ArduPilot's default 0 reverses
+it while the throttle output is negative, and its MOT_SLEWRATE throttle slew is not modelled):
 
 1. RC input to control value with the channel's dead zone (``RC_Channel::pwm_to_angle_dz_trim``,
    integer arithmetic): above ``trim + dz`` the value is
