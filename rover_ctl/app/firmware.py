@@ -21,6 +21,7 @@ import json
 import math
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import time
@@ -32,7 +33,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from rover_ctl.app.sim import STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
+from rover_ctl.app.sim import DAEMON_START_ATTEMPTS, STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
 from rover_ctl.vocabulary import PILOT_STEER_TYPE, STEER_UNCHANGED_WHEN_REVERSING
 from sitl.launch import free_port, line_relay, signals_held, stop_process
 
@@ -172,16 +173,34 @@ class FirmwareRun(SimRun):
 
     def start(self) -> None:
         """The daemon (behind the line relay, with ``line_baud``) and the watcher listen first,
-        then the firmware dials both."""
-        if self.workdir.exists():
-            shutil.rmtree(self.workdir)
-        self.workdir.mkdir(parents=True)
+        then the firmware dials both. A port picked free can be taken by another process before
+        the daemon binds it (it then exits EX_UNAVAILABLE): the daemon, watcher and firmware start
+        again on new ports, as ``SimRun`` does for its daemon."""
         o = self.options
         if o.line_baud:
             # SERIAL0 dials the relay, which serves the line on a pty in the firmware's time.
             self._relay = self._relay_stack.enter_context(line_relay(
                 o.line_baud, self.line_stats_path, byte_error=o.line_byte_error, speedup=1.0 if o.lockstep else o.speedup,
                 seed=o.seed, port=self.vehicle_port))  # fmt: skip
+        for attempt in range(1, DAEMON_START_ATTEMPTS + 1):
+            self._start_children()
+            try:
+                self._connect_gcs()
+                break
+            except SimError:
+                if attempt == DAEMON_START_ATTEMPTS or self.daemon.poll() != os.EX_UNAVAILABLE:
+                    raise
+                self._stop_children()
+                self.gcs_port, self.watch_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+                self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
+                if not o.line_baud:  # the relay's port is bound already
+                    self.vehicle_port = free_port(socket.SOCK_DGRAM)
+        self.gcs.upload(self.mission)
+
+    def _start_children(self) -> None:
+        if self.workdir.exists():
+            shutil.rmtree(self.workdir)
+        self.workdir.mkdir(parents=True)
         self._start_daemon()
         self.watcher = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
@@ -194,8 +213,16 @@ class FirmwareRun(SimRun):
             self.sitl = FirmwareProcess(self._firmware_command(), cwd=self.workdir, stdin=subprocess.DEVNULL,
                                         stdout=sitl_out, stderr=sitl_log)  # fmt: skip
         lower_priority(self.sitl.pid, FIRMWARE_NICE)
-        self._connect_gcs()
-        self.gcs.upload(self.mission)
+
+    def _stop_children(self) -> None:
+        """Undo ``_start_children`` after a daemon that could not bind its ports."""
+        stop_process(self.daemon, signal.SIGINT, STOP_TIMEOUT_S)
+        self.sitl.stop(STOP_TIMEOUT_S)
+        for conn in (self.gcs, self.watcher):
+            if conn is not None:
+                conn.close()
+        self.gcs = self.watcher = None
+        self._truth_file.close()
 
     def _check_children(self) -> None:
         for name, proc, log_path in (("ardurover", self.sitl, self.out / "sitl.log"), ("rover-ctl run", self.daemon, self.daemon_output)):

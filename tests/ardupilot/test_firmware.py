@@ -231,3 +231,20 @@ def test_stock_pilot_steer_type_refuses_arming_and_says_what_to_set(tmp_path):
     events = _events(tmp_path / "run")
     said = next(e["t_s"] for e in events if e.get("text") == f"Vehicle {reason}")
     assert said < next(e["t_s"] for e in events if e["type"] == "arm_request" or e.get("text", "").startswith("PreArm"))  # at connect
+
+
+def test_a_vehicle_port_taken_before_the_daemon_binds_it_is_replaced(tmp_path):
+    """The harness picks the daemon's ports free, then the daemon binds them: a process beside it
+    can take one in between (the loop benchmark lost a run so). The daemon exits 69 and the
+    daemon, watcher and firmware start again on new ports."""
+    import socket
+
+    options = FirmwareOptions(mission=MISSION, out=tmp_path / "run", lockstep=False, speedup=10, rangefinders="none",
+                              config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
+    run = FirmwareRun(options)
+    taken = run.vehicle_port
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as thief:
+        thief.bind(("127.0.0.1", taken))
+        with run:
+            assert run.vehicle_port != taken and run.daemon.poll() is None
+            assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0), run.progress
