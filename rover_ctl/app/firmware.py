@@ -33,7 +33,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402  (MAVLINK20 first: mavutil's default dialect is MAVLink 1 without it)
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from rover_ctl.app.sim import DAEMON_START_ATTEMPTS, STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
+from rover_ctl.app.sim import STOP_TIMEOUT_S, WATCHER_SYSID, Progress, SimError, SimOptions, SimRun
 from rover_ctl.vocabulary import PILOT_STEER_TYPE, STEER_UNCHANGED_WHEN_REVERSING
 from sitl.launch import free_port, line_relay, signals_held, stop_process
 
@@ -182,19 +182,7 @@ class FirmwareRun(SimRun):
             self._relay = self._relay_stack.enter_context(line_relay(
                 o.line_baud, self.line_stats_path, byte_error=o.line_byte_error, speedup=1.0 if o.lockstep else o.speedup,
                 seed=o.seed, port=self.vehicle_port))  # fmt: skip
-        for attempt in range(1, DAEMON_START_ATTEMPTS + 1):
-            self._start_children()
-            try:
-                self._connect_gcs()
-                break
-            except SimError:
-                if attempt == DAEMON_START_ATTEMPTS or self.daemon.poll() != os.EX_UNAVAILABLE:
-                    raise
-                self._stop_children()
-                self.gcs_port, self.watch_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
-                self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
-                if not o.line_baud:  # the relay's port is bound already
-                    self.vehicle_port = free_port(socket.SOCK_DGRAM)
+        self._start_until_bound(self._start_children, self._restart_on_new_ports)
         self.gcs.upload(self.mission)
 
     def _start_children(self) -> None:
@@ -214,8 +202,8 @@ class FirmwareRun(SimRun):
                                         stdout=sitl_out, stderr=sitl_log)  # fmt: skip
         lower_priority(self.sitl.pid, FIRMWARE_NICE)
 
-    def _stop_children(self) -> None:
-        """Undo ``_start_children`` after a daemon that could not bind its ports."""
+    def _restart_on_new_ports(self) -> None:
+        """Undo ``_start_children`` after a daemon that could not bind its ports; pick new ones."""
         stop_process(self.daemon, signal.SIGINT, STOP_TIMEOUT_S)
         self.sitl.stop(STOP_TIMEOUT_S)
         for conn in (self.gcs, self.watcher):
@@ -223,6 +211,10 @@ class FirmwareRun(SimRun):
                 conn.close()
         self.gcs = self.watcher = None
         self._truth_file.close()
+        self.gcs_port, self.watch_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+        self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
+        if not self.options.line_baud:  # the relay's port is bound already
+            self.vehicle_port = free_port(socket.SOCK_DGRAM)
 
     def _check_children(self) -> None:
         for name, proc, log_path in (("ardurover", self.sitl, self.out / "sitl.log"), ("rover-ctl run", self.daemon, self.daemon_output)):

@@ -325,18 +325,27 @@ class SimRun:
         self.watcher = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.watch_port}", source_system=WATCHER_SYSID,
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        self._start_until_bound(self._start_daemon, self._new_gcs_port)
+        self.gcs.upload(self.mission)
+
+    def _start_until_bound(self, start: Callable[[], None], repick: Callable[[], None]) -> None:
+        """``start()`` (which starts the daemon), then our GCS connection. A port picked free can
+        be taken by another process before the daemon binds it: the daemon exits EX_UNAVAILABLE,
+        ``repick()`` undoes the start on new ports and it goes again, DAEMON_START_ATTEMPTS in all."""
         for attempt in range(1, DAEMON_START_ATTEMPTS + 1):
-            self._start_daemon()
+            start()
             try:
                 self._connect_gcs()
-                break
+                return
             except SimError:
                 if attempt == DAEMON_START_ATTEMPTS or self.daemon.poll() != os.EX_UNAVAILABLE:
                     raise
-                self.gcs.close()  # the port picked free was taken before the daemon bound it: another one
-                self.gcs_port = free_port(socket.SOCK_DGRAM)
-                self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
-        self.gcs.upload(self.mission)
+                repick()
+
+    def _new_gcs_port(self) -> None:
+        self.gcs.close()
+        self.gcs_port = free_port(socket.SOCK_DGRAM)
+        self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
 
     def _start_sitl(self) -> None:
         """The emulator, started again on new ports when one picked free was taken before it bound
