@@ -52,14 +52,14 @@ from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelD
 from rover_ctl.mavlink import budget  # noqa: E402
 from rover_ctl.mavlink.link_health import LinkHealth  # noqa: E402
 from rover_ctl.mavlink.telemetry import StatusTextAssembler  # noqa: E402
+from rover_ctl.vocabulary import PILOT_STEER_TYPE  # noqa: E402
 # The dialect module itself, not mavutil.mavlink: that is whichever dialect was current when this
 # module was imported (MAVLink 1's "all" if gcs.py, say, imported mavutil before MAVLINK20 was set).
-from rover_ctl.vocabulary import PILOT_STEER_TYPE  # noqa: E402
 from rover_ctl.vocabulary import mav as mavlink  # noqa: E402
 
-UINT16_MAX = 65535
 log = logging.getLogger(__name__)
 
+UINT16_MAX = 65535
 RC_RELEASE = 0
 """RC_CHANNELS_OVERRIDE channels 1-8: 0 hands the channel back to the radio, UINT16_MAX leaves it."""
 EPOCH_THRESHOLD_US = 10**15

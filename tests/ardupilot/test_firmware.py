@@ -148,10 +148,7 @@ def test_at_50x_the_loop_degrades_but_the_mission_completes(tmp_path, emulator):
 def test_first_leg_in_real_time(tmp_path, emulator):
     """ArduPilot at speed-up 1, as a real rover: a 12 m leg north from CMAC, driven to its end
     (the bundled mission's 40 m first leg took a minute of the suite's wall time for no more)."""
-    leg = tmp_path / "leg.waypoints"
-    home = MISSION.read_text().splitlines()[1]
-    lat, lon = LocalFrame(*(float(v) for v in home.split("\t")[8:11])).to_geodetic(0.0, 12.0)
-    leg.write_text(f"QGC WPL 110\n{home}\n1\t0\t3\t16\t0\t0\t0\t0\t{lat:.7f}\t{lon:.7f}\t0\t1\n")
+    leg = _from_cmac(tmp_path / "leg.waypoints", [(0.0, 12.0)])
     options = FirmwareOptions(mission=leg, out=tmp_path / "run", lockstep=False, speedup=1, rangefinders="none",
                               config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
     with FirmwareRun(options) as run:
@@ -197,16 +194,20 @@ def _events(out: Path) -> list[dict]:
     return read_jsonl(out / "events.jsonl")
 
 
-def _sharp_turns(path: Path) -> Path:
-    """Four turns of 140-170 degrees from CMAC: each one a pivot with the throttle near zero."""
+def _from_cmac(path: Path, legs_en: list[tuple[float, float]]) -> Path:
+    """A QGC WPL mission from the bundled mission's home through waypoints east/north of it (m)."""
     home = MISSION.read_text().splitlines()[1]
     frame = LocalFrame(*(float(v) for v in home.split("\t")[8:11]))
     lines = ["QGC WPL 110", home]
-    for seq, (east_m, north_m) in enumerate([(0.0, 12.0), (2.0, 1.0), (14.0, 8.0), (1.0, 10.0), (12.0, 0.0)], 1):
+    for seq, (east_m, north_m) in enumerate(legs_en, 1):
         lat, lon = frame.to_geodetic(east_m, north_m)
         lines.append(f"{seq}\t0\t3\t16\t0\t0\t0\t0\t{lat:.7f}\t{lon:.7f}\t0\t1")
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+SHARP_TURNS = [(0.0, 12.0), (2.0, 1.0), (14.0, 8.0), (1.0, 10.0), (12.0, 0.0)]
+"""Four turns of 140-170 degrees from CMAC: each one a pivot with the throttle near zero."""
 
 
 def test_pivots_through_sharp_turns_at_10x(tmp_path):
@@ -214,7 +215,7 @@ def test_pivots_through_sharp_turns_at_10x(tmp_path):
     pivot whose wheel loop dips the throttle below zero still turns the way it was asked. At the
     stock 0 the same mission never finished: the steering flipped whenever the slew-limited throttle
     went negative, and the rover swung between the two ways at the fourth turn until the timeout."""
-    options = FirmwareOptions(mission=_sharp_turns(tmp_path / "turns.waypoints"), out=tmp_path / "run", lockstep=False,
+    options = FirmwareOptions(mission=_from_cmac(tmp_path / "turns.waypoints", SHARP_TURNS), out=tmp_path / "run", lockstep=False,
                               speedup=10, timeout_s=150.0, rangefinders="none", config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
     metrics = simulate_firmware(options)
     assert metrics["complete"] and metrics["reached_seqs"] == [1, 2, 3, 4, 5], metrics
