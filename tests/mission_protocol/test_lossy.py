@@ -28,7 +28,8 @@ class LossyProxy:
 
     Each datagram, either way, is dropped with probability ``p_drop``, else sent twice with
     ``p_dup``, else held back with ``p_hold`` and released after the next datagram in the same
-    direction (or after ``hold_s``): reordering. Seeded, so a failure can be replayed.
+    direction (reordered: counted as ``reordered``) or, when none comes within ``hold_s``, late
+    (``delayed``). Seeded, so a failure can be replayed.
     """
 
     def __init__(self, target_port: int, seed: int, p_drop=0.2, p_dup=0.2, p_hold=0.2, hold_s=0.05) -> None:
@@ -36,7 +37,7 @@ class LossyProxy:
         self.target = ("127.0.0.1", target_port)
         self.rng = random.Random(seed)
         self.p_drop, self.p_dup, self.p_hold, self.hold_s = p_drop, p_dup, p_hold, hold_s
-        self.stats = {"forwarded": 0, "dropped": 0, "duplicated": 0, "reordered": 0}
+        self.stats = {"forwarded": 0, "dropped": 0, "duplicated": 0, "reordered": 0, "delayed": 0}
         self._stop = threading.Event()
         self._ready = threading.Event()
         self._thread = threading.Thread(target=self._run, name="lossy-proxy", daemon=True)
@@ -73,6 +74,7 @@ class LossyProxy:
                 for key, (data, since) in list(held.items()):
                     if now - since >= self.hold_s:
                         del held[key]
+                        self.stats["delayed"] += 1
                         (back if key == 0 else front).sendto(data, self.target if key == 0 else client)
 
     def _forward(self, out, dest, data: bytes, held: dict, now: float) -> None:
@@ -83,7 +85,6 @@ class LossyProxy:
             return
         if roll < self.p_drop + self.p_hold and key not in held:
             held[key] = (data, now)
-            self.stats["reordered"] += 1
             return
         out.sendto(data, dest)
         self.stats["forwarded"] += 1
@@ -92,6 +93,7 @@ class LossyProxy:
             self.stats["duplicated"] += 1
         if key in held:  # release the held one after this newer datagram: reordered
             out.sendto(held.pop(key)[0], dest)
+            self.stats["reordered"] += 1
 
 
 def settled(lt: LinkThread, timeout_s: float = 5.0) -> None:
@@ -137,7 +139,8 @@ def test_uploads_through_20pct_loss_dup_reorder_are_all_or_nothing(udp_port):
             assert client.download().same_as(stored)  # the download path through the same proxy
     print(f"{successes}/{UPLOADS} uploads acknowledged through the proxy: {proxy.stats}")
     assert successes >= UPLOADS - 1, proxy.stats
-    assert min(proxy.stats["dropped"], proxy.stats["duplicated"], proxy.stats["reordered"]) > 10, proxy.stats
+    # Real reorders need the next datagram within hold_s (19 of 72 holds here): fewer on a loaded machine.
+    assert min(proxy.stats["dropped"], proxy.stats["duplicated"]) > 10 and proxy.stats["reordered"] > 5, proxy.stats
 
 
 def test_an_abandoned_upload_times_out_and_keeps_the_stored_mission(udp_port, mission):
