@@ -629,6 +629,21 @@ class EvadeParams:
 
 
 @dataclass
+class SideGuardParams:
+    """Keeping the flanks clear (``rover_ctl.navigation.side_guard``): a turn away from an obstacle
+    the left or right rangefinder sees closer than ``range_m``, added to the rule base's wheels."""
+
+    enabled: bool = True
+    """Turn away from close side readings while the rule base drives."""
+    range_m: float = 0.35
+    """A side reading below this turns the rover away (m); the rangefinders read down to 0.2 m."""
+    max_yaw_rate_radps: float = 2.75
+    """Yaw rate at a reading of 0 m (rad/s), in proportion below ``range_m``: 1.18 rad/s at 0.2 m.
+    0.35 and 0.45 m, 2.75 and 4.58 rad/s did about equally well in the in-process runner
+    (docs/perception.md "Flank contacts")."""
+
+
+@dataclass
 class PassageParams:
     """Narrow passages (``rover_ctl.navigation.gaps``): an opening barely wider than the rover,
     seen through by a side rangefinder as the rover follows a wall, lined up on and driven through."""
@@ -793,6 +808,7 @@ class Config:
     yielding: YieldParams = field(default_factory=YieldParams)
     evasion: EvadeParams = field(default_factory=EvadeParams)
     passage: PassageParams = field(default_factory=PassageParams)
+    side_guard: SideGuardParams = field(default_factory=SideGuardParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
     obstacle_map: ObstacleMapParams = field(default_factory=ObstacleMapParams)
     command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)

@@ -59,6 +59,7 @@ from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
+from rover_ctl.navigation.side_guard import side_turn_radps
 from rover_ctl.navigation.yielding import Yielder
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
@@ -72,7 +73,7 @@ LOG_COLUMNS = (
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
-    "map_obstacles", "evade_track",
+    "map_obstacles", "evade_track", "side_turn_radps",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 _EMPTY_ROW = dict.fromkeys(LOG_COLUMNS, "")
@@ -585,10 +586,16 @@ class Autopilot:
             row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip
-        self._commanded_speed_mps = (nav.left_rpm + nav.right_rpm) / 2.0 / self._speed_to_rpm(1.0)
-        row.update(left_set_rpm=nav.left_rpm, right_set_rpm=nav.right_rpm,
+        left, right = nav.left_rpm, nav.right_rpm
+        side_turn = side_turn_radps(ranges, self.config.side_guard)  # something at a flank: turn away from it
+        if side_turn:
+            half_rpm = self._speed_to_rpm(side_turn * self.config.robot.track_m / 2.0)
+            left, right = left - half_rpm, right + half_rpm
+            row.update(side_turn_radps=side_turn)
+        self._commanded_speed_mps = (left + right) / 2.0 / self._speed_to_rpm(1.0)
+        row.update(left_set_rpm=left, right_set_rpm=right,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
-        return self.wheels.step(t_s, dt_s, nav.left_rpm, nav.right_rpm)
+        return self.wheels.step(t_s, dt_s, left, right)
 
     def _update_obstacle_map(self, t_s: float, pose: Pose, row: dict[str, Any]) -> None:
         """Every ``update_period_s``: the queued readings into the persistent-obstacle map, and

@@ -265,6 +265,22 @@ def ex_evasion(d: Daemon) -> list:
     return trace
 
 
+def ex_side_guard(d: Daemon) -> list:
+    """The rule base's wheels along a leg north, with something at the left or right flank at
+    several ranges (the side guard turns the rover away from it)."""
+    from rover_ctl.estimation.readings import RangeReading
+
+    ap, trace = d.autopilot, []
+    pose = SimpleNamespace(east_m=0.0, north_m=0.0, heading_rad=math.pi / 2, speed_mps=1.0)
+    clear = FailsafeDecision(Action.NONE, (), (), frozenset(), False, False)
+    for k, (left_m, right_m) in enumerate(((4.0, 4.0), (0.2, 4.0), (0.3, 4.0), (4.0, 0.25), (0.45, 0.3), (0.2, 0.2))):
+        ap._ranges = {o: RangeReading(k * 10.0, o, o, r, 0.2, 4.0) for o, r in ((6, left_m), (2, right_m), (0, 4.0))}
+        row = dict.fromkeys(LOG_COLUMNS, "")
+        ap._drive(k * 10.0, 0.04, pose, (0.0, 20.0), 1.2, 1, clear, row)  # 10 s apart: the memory forgets
+        trace.append((round(row["left_set_rpm"], 9), round(row["right_set_rpm"], 9), row["side_turn_radps"]))
+    return trace
+
+
 def mapping(d: Daemon) -> None:
     """A mission ahead, and the persistent-obstacle map on (whatever the default)."""
     mission_ahead(d)
@@ -501,6 +517,7 @@ EXERCISES = {
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
     "obstacle_map": (mapping, ex_obstacle_map, tuple(f"obstacle_map.{f.name}" for f in dataclasses.fields(ObstacleMapParams) if f.name != "enabled")),
     "map_switch": (mission_ahead, ex_map_switch, ("obstacle_map.enabled",)),
+    "side_guard": (mission_ahead, ex_side_guard, ("side_guard.", "robot.track_m", "robot.wheel_radius_m")),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
 

@@ -1,0 +1,50 @@
+"""Keeping the flanks clear: a turn away from whatever the side rangefinders see at the rover's side.
+
+Pure: no clock, no I/O. The autopilot adds ``side_turn_radps`` to the fuzzy navigator's wheel
+setpoints every step it drives by the rule base.
+
+**Why.** The rule base (the paper's and the default) never turns away from a side reading alone:
+with the target on the side where something stands close, it drives straight on. That is right
+beside a wall and wrong beside a drum crossing the rover's way. A crosser seen late from the left
+makes the rule base turn right, the way the crosser walks; the rover then runs beside it, slowed
+by the near reading, turns back towards its target, and the crosser strikes its flank. This was
+the commonest collision of the ``moving`` and ``crossing`` benchmarks (in-process runner, seeds
+1-200, default rule base: 17 of 25 failed episodes struck on the left or right flank,
+docs/perception.md "Flank contacts").
+
+**Method.** With ``r_L`` and ``r_R`` the ranges of the left and right rangefinders
+(MAV_SENSOR_ROTATION_YAW_270 and _YAW_90) and ``R = range_m``::
+
+    push(r) = clip((R - r) / R, 0, 1)
+    yaw rate = max_yaw_rate_radps * (push(r_R) - push(r_L))     (rad/s, counter-clockwise)
+
+which the autopilot adds to the rule base's wheel setpoints as a speed difference of
+``yaw rate * track`` (half to each wheel), the forward speed unchanged. A rangefinder the rover
+lacks, or one silent and left out by the failsafe, pushes nothing: the failsafe slows the rover for
+it already. A wall at constant range beside the rover bends its path away by a few degrees and
+lets go once past ``range_m``.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+from rover_ctl.config import SideGuardParams
+from rover_ctl.vocabulary import mav
+
+LEFT, RIGHT = mav.MAV_SENSOR_ROTATION_YAW_270, mav.MAV_SENSOR_ROTATION_YAW_90
+
+
+def side_turn_radps(ranges_m: Mapping[int, float], params: SideGuardParams) -> float:
+    """The yaw rate (rad/s, counter-clockwise positive) that turns the rover away from what its
+    side rangefinders see within ``params.range_m``; 0 when nothing is that close (or disabled)."""
+    if not params.enabled or params.range_m <= 0.0:
+        return 0.0
+
+    def push(orientation: int) -> float:
+        range_m = ranges_m.get(orientation)
+        if range_m is None or not range_m < params.range_m:  # absent, NaN or clear
+            return 0.0
+        return min((params.range_m - max(range_m, 0.0)) / params.range_m, 1.0)
+
+    return params.max_yaw_rate_radps * (push(RIGHT) - push(LEFT))

@@ -1,0 +1,59 @@
+"""The side guard: a turn away from what the left and right rangefinders see close (pure)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from rover_ctl.config import SideGuardParams
+from rover_ctl.navigation.side_guard import LEFT, RIGHT, side_turn_radps
+
+PARAMS = SideGuardParams()
+
+
+def test_nothing_close_or_nothing_seen_turns_nothing():
+    assert side_turn_radps({}, PARAMS) == 0.0
+    assert side_turn_radps({LEFT: 4.0, RIGHT: math.inf}, PARAMS) == 0.0
+    assert side_turn_radps({LEFT: math.nan, RIGHT: PARAMS.range_m}, PARAMS) == 0.0  # NaN: no reading
+    assert side_turn_radps({0: 0.2, 1: 0.2, 7: 0.2, 4: 0.2}, PARAMS) == 0.0  # front, diagonals, back: the rule base's
+
+
+def test_a_close_left_reading_turns_right_and_a_right_one_left_in_proportion():
+    at_min = side_turn_radps({LEFT: 0.2}, PARAMS)
+    assert at_min == pytest.approx(-PARAMS.max_yaw_rate_radps * (PARAMS.range_m - 0.2) / PARAMS.range_m)
+    assert at_min == pytest.approx(-1.18, abs=0.01)  # the figure the config's docstring gives
+    assert side_turn_radps({RIGHT: 0.2}, PARAMS) == pytest.approx(-at_min)
+    assert side_turn_radps({LEFT: 0.3}, PARAMS) == pytest.approx(at_min / 3.0)
+    assert side_turn_radps({LEFT: 0.0}, PARAMS) == pytest.approx(-PARAMS.max_yaw_rate_radps)
+    assert side_turn_radps({LEFT: -1.0}, PARAMS) == pytest.approx(-PARAMS.max_yaw_rate_radps)  # bounded
+
+
+def test_off_it_turns_nothing():
+    assert side_turn_radps({LEFT: 0.2}, SideGuardParams(enabled=False)) == 0.0
+    assert side_turn_radps({LEFT: 0.2}, SideGuardParams(range_m=0.0)) == 0.0
+
+
+@given(st.floats(0.0, 5.0), st.floats(0.0, 5.0))
+def test_mirror_images_turn_opposite_ways_within_the_limit(left_m, right_m):
+    turn = side_turn_radps({LEFT: left_m, RIGHT: right_m}, PARAMS)
+    assert side_turn_radps({LEFT: right_m, RIGHT: left_m}, PARAMS) == pytest.approx(-turn)
+    assert abs(turn) <= PARAMS.max_yaw_rate_radps
+    assert (turn < 0) == (left_m < right_m and left_m < PARAMS.range_m) or turn == 0.0
+
+
+def test_a_rover_driven_along_a_wall_too_close_is_bent_away_until_clear():
+    """A unicycle at 1 m/s northwards, its left side 0.22 m from a wall along x = -0.42 (its
+    half-width 0.2 m), steered only by the guard: it turns away and goes on once the wall reads
+    beyond ``range_m``, a few degrees off north, not a spin."""
+    x, y, heading, half_width_m, wall_x = 0.0, 0.0, math.pi / 2, 0.2, -0.42
+    for _ in range(100):  # 4 s at 25 Hz
+        # The left rangefinder looks square to the rover's side; it meets the wall at this range.
+        beam = heading + math.pi / 2
+        range_m = (x - wall_x) / -math.cos(beam) - half_width_m if math.cos(beam) < -1e-6 else math.inf
+        heading += side_turn_radps({LEFT: range_m}, PARAMS) * 0.04
+        x, y = x + math.cos(heading) * 0.04, y + math.sin(heading) * 0.04
+    assert x - half_width_m - wall_x >= PARAMS.range_m - 0.05  # clear of the guard's range, about
+    assert math.pi / 2 - math.radians(20.0) < heading < math.pi / 2  # bent right, a little
