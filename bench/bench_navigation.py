@@ -5,8 +5,8 @@ head_on, overtaking, narrow_gap, dense_clutter; all at ArduPilot's CMAC field, s
 never told where the obstacles are, it sees them only with its rangefinders).
 
 Variants: the rule bases ``paper`` and ``default`` (the daemon as shipped: yielding to crossing
-traffic on), and ``default-yield``: the default rule base with yielding off (``YLD_ENABLE`` 0,
-the navigator of the previous rows).
+traffic on), ``default-yield``: the default rule base with yielding off (``YLD_ENABLE`` 0,
+the navigator of the previous rows), and ``default-side``: with the side guard off (``SIDE_ENABLE`` 0).
 A collision is "moving" when the rover's true speed at the contact was above
 ``STOPPED_SPEED_MPS``, else "stopped" (struck while yielding).
 
@@ -43,6 +43,7 @@ VARIANTS = {
     "paper": ("paper", []),
     "default": ("default", []),
     "default-yield": ("default", ["yielding.enabled=0"]),
+    "default-side": ("default", ["side_guard.enabled=0"]),
     "default+map": ("default", ["obstacle_map.enabled=1"]),
     "default+map+gap": ("default", ["obstacle_map.enabled=1", "passage.enabled=1"]),
 }
@@ -287,7 +288,9 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
     )
     markdown += "" if rulebase else (
         "\n\ndefault-yield: the default rule base with yielding to crossing traffic off (`YLD_ENABLE=0`, "
-        "docs/perception.md); rows measured before yielding existed ran without it too. Collisions (moving / stopped): "
+        "docs/perception.md); rows measured before yielding existed ran without it too. default-side: the side guard off "
+        "(`SIDE_ENABLE=0`, docs/perception.md \"Flank contacts\"); rows measured before 2026-11-26's side guard ran without it. "
+        "Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
         "the split was added have it). Measured: the date of the run that made the row. default+map: the planner's "
         "persistent-obstacle map on (`OMAP_ENABLE=1`, docs/perception.md); default+map+gap: that and narrow passages "
