@@ -183,7 +183,7 @@ class FirmwareRun(SimRun):
                 o.line_baud, self.line_stats_path, byte_error=o.line_byte_error, speedup=1.0 if o.lockstep else o.speedup,
                 seed=o.seed, port=self.vehicle_port))  # fmt: skip
         self._start_until_bound(self._start_children, self._restart_on_new_ports)
-        self.gcs.upload(self.mission)
+        self._upload_mission()
 
     def _start_children(self) -> None:
         if self.workdir.exists():

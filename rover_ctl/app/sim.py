@@ -49,7 +49,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
 from rover_ctl.autopilot.executor import NAV_COMMANDS  # noqa: E402
 from rover_ctl.config import GcsParams, load_config  # noqa: E402
 from rover_ctl.estimation.frame import LocalFrame  # noqa: E402
-from rover_ctl.mavlink.mission_client import MissionClient  # noqa: E402
+from rover_ctl.mavlink.mission_client import MissionClient, MissionClientError  # noqa: E402
 from rover_ctl.mavlink.signing import KeyStore  # noqa: E402
 from rover_ctl.mavlink.telemetry import StatusTextAssembler  # noqa: E402
 from rover_ctl.mission.files import load_mission  # noqa: E402
@@ -326,7 +326,16 @@ class SimRun:
                                                   source_component=mav.MAV_COMP_ID_MISSIONPLANNER, dialect="ardupilotmega")  # fmt: skip
         self.watcher.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         self._start_until_bound(self._start_daemon, self._new_gcs_port)
-        self.gcs.upload(self.mission)
+        self._upload_mission()
+
+    def _upload_mission(self) -> None:
+        """The mission to the daemon. Refused or unanswered: a SimError naming why (the daemon's
+        exit first, when it has gone), not a traceback."""
+        try:
+            self.gcs.upload(self.mission)
+        except MissionClientError as exc:
+            self._check_children()
+            raise SimError(f"{exc}; see {self.daemon_output}") from None
 
     def _start_until_bound(self, start: Callable[[], None], repick: Callable[[], None]) -> None:
         """``start()`` (which starts the daemon), then our GCS connection. A port picked free can

@@ -84,6 +84,15 @@ def test_a_fifo_or_a_plain_file_where_a_device_or_file_belongs_is_one_line(tmp_p
     assert plain.read_text() == "QGC WPL 110\n"
 
 
+def test_sim_with_a_mission_the_daemon_refuses_says_why_in_one_line(tmp_path, capsys):
+    """The daemon refuses the upload (here: more items than GCS_MIS_MAX allows); the refusal came
+    out of ``SimRun.start`` as a MissionClientError traceback."""
+    argv = ["sim", "missions/cmac_jump.waypoints", "--lockstep", "--out", str(tmp_path / "runs"), "--set", "gcs.mission_max_items=2"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mission upload refused by the vehicle: MAV_MISSION_NO_SPACE" in err[0], err
+
+
 @pytest.mark.parametrize(
     "world, message",
     [(b"", "not valid JSON"), (b'{"type": "FeatureCo', "not valid JSON"), (b"[1, 2]", "expected a GeoJSON FeatureCollection"),
