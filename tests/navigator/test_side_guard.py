@@ -47,7 +47,7 @@ def test_mirror_images_turn_opposite_ways_within_the_limit(left_m, right_m):
 def test_a_rover_driven_along_a_wall_too_close_is_bent_away_until_clear():
     """A unicycle at 1 m/s northwards, its left side 0.22 m from a wall along x = -0.42 (its
     half-width 0.2 m), steered only by the guard: it turns away and goes on once the wall reads
-    beyond ``range_m``, a few degrees off north, not a spin."""
+    beyond ``range_m``, 18 degrees off north (the figure side_guard's docstring gives), not a spin."""
     x, y, heading, half_width_m, wall_x = 0.0, 0.0, math.pi / 2, 0.2, -0.42
     for _ in range(100):  # 4 s at 25 Hz
         # The left rangefinder looks square to the rover's side; it meets the wall at this range.
@@ -56,4 +56,4 @@ def test_a_rover_driven_along_a_wall_too_close_is_bent_away_until_clear():
         heading += side_turn_radps({LEFT: range_m}, PARAMS) * 0.04
         x, y = x + math.cos(heading) * 0.04, y + math.sin(heading) * 0.04
     assert x - half_width_m - wall_x >= PARAMS.range_m - 0.05  # clear of the guard's range, about
-    assert math.pi / 2 - math.radians(20.0) < heading < math.pi / 2  # bent right, a little
+    assert math.degrees(math.pi / 2 - heading) == pytest.approx(18.3, abs=1.0)  # bent right, and no more
