@@ -118,7 +118,17 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
     assert max(before) > 0.5  # it was driving
     assert max(abs(v) for v in after) < 0.05  # and stood still from 0.5 s of sim time after HOLD
     last = states[-1]
-    assert math.dist(home.to_enu(last["lat_deg"], last["lon_deg"]), (0.0, 0.0)) < near_home_m
+    # RTL stops within rtl_radius_m of the daemon's home (its first fix) by its estimate, which
+    # follows the GPS's slowly wandering bias: compare where the GPS, less its white noise, puts
+    # the rover with that home. (The truth alone drifts with the bias: 3.1 m in 340 s of sim time,
+    # and how much sim time passes depends on how fast lockstep runs while the ground station's
+    # parameter download and mode changes take their wall time.)
+    first_fix = next(e for e in events if e["type"] == "frame")
+    daemon_home_en = home.to_enu(first_fix["lat_deg"], first_fix["lon_deg"])
+    bias = [r for r in read_jsonl(out / "truth.jsonl") if r["type"] == "gps"][-1]
+    east, north = home.to_enu(last["lat_deg"], last["lon_deg"])
+    seen_en = (east + bias["err_bias_e_m"], north + bias["err_bias_n_m"])
+    assert math.dist(seen_en, daemon_home_en) < 2.0 + 1.0  # RTL_RADIUS, and the estimate's own error
     assert abs(last["speed_mps"]) < 0.05
     log = mavutil.mavlink_connection(str(out / "vehicle.tlog"))
     overrides = [(m.chan1_raw, m.chan3_raw) for m in iter(lambda: log.recv_match(type="RC_CHANNELS_OVERRIDE"), None)]
