@@ -292,6 +292,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("estimator.glitch_reset_s", "EKF_GLITCH_TIME", 0.0, 600.0, RW, {}),
     ("estimator.attitude_timeout_s", "EKF_ATT_TIMEOUT", 0.01, 60.0, RW, {}),
     ("estimator.max_lag_s", "EKF_MAX_LAG", 0.0, 10.0, RW, {}),
+    ("estimator.pose_max_lead_s", "EKF_POSE_LEAD", 0.0, 10.0, RW, {}),
     ("estimator.clock_restart_s", "EKF_CLK_RESET", 0.1, 600.0, RW, {}),
     ("estimator.gps_max_lead_s", "EKF_GPS_LEAD", 0.0, 60.0, RW, {}),
     ("estimator.gps_timeout_s", "EKF_GPS_TIMEOUT", 0.1, 60.0, RW, {}),

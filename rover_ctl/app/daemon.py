@@ -543,7 +543,7 @@ class Daemon:
         self.control_step(t_s, vehicle_age_s=0.0 if last is None else max(0.0, t_s - last))
 
     def control_step(self, t_s: float, vehicle_age_s: float) -> None:
-        out = self.autopilot.step(t_s, self._pose(), self._readings(t_s, vehicle_age_s))
+        out = self.autopilot.step(t_s, self._pose(t_s), self._readings(t_s, vehicle_age_s))
         self._send_command(out)
         self._apply(out.events)
         row = out.log_row
@@ -555,8 +555,9 @@ class Daemon:
             if self.steps % 50 == 0:
                 self.csv.flush()
 
-    def _pose(self):
-        return self.estimator.pose() if self.estimator and self.estimator.initialised else None
+    def _pose(self, t_s: float):
+        """The estimate at ``t_s`` (vehicle time; ``PoseEstimator.pose`` predicts up to its lead)."""
+        return self.estimator.pose(t_s) if self.estimator and self.estimator.initialised else None
 
     def _readings(self, t_s: float, vehicle_age_s: float) -> Readings:
         gcs_s = self._gcs_heartbeat_vehicle_s
@@ -591,7 +592,7 @@ class Daemon:
             return
         self._silent_neutral_wall_s = time.monotonic() + self.period_s
         t_s = link.vehicle_time_s + age_s
-        out = self.autopilot.step(t_s, self._pose(), self._readings(t_s, age_s))
+        out = self.autopilot.step(t_s, self._pose(t_s), self._readings(t_s, age_s))
         self._apply(out.events)
         if out.command is not RELEASE:
             self._send_command(out)
@@ -613,7 +614,7 @@ class Daemon:
                                      drop_rate_cpct=round(100 * health.loss_pct), errors_comm=health.crc_errors)  # fmt: skip
         if self.estimator is None or not self.estimator.initialised or not self.gcs.pose_due(now):
             return
-        pose = self.estimator.pose()
+        pose = self.estimator.pose(self.link.vehicle_time_s)
         lat, lon = self.frame.to_geodetic(pose.east_m, pose.north_m)
         time_boot_ms = int(pose.time_s * 1000)
         compass_rad = enu_to_compass_rad(pose.heading_rad)

@@ -264,7 +264,7 @@ class Episode:
     def _pose(self, t_s: float) -> Pose | None:
         if self.use_truth:
             return self._true_pose(t_s)
-        return self.estimator.pose() if self.estimator and self.estimator.initialised else None
+        return self.estimator.pose(t_s) if self.estimator and self.estimator.initialised else None
 
     def _true_pose(self, t_s: float) -> Pose | None:
         if self.frame is None:

@@ -405,6 +405,8 @@ def ex_estimator(d: Daemon) -> list:
             p = est.pose()
             trace.append((p.east_m, p.north_m, p.heading_rad, p.speed_mps, p.yaw_rate_radps, p.healthy, p.gps_ok,
                           p.position_sigma_m, p.heading_sigma_rad))  # fmt: skip
+            ahead = est.pose(r.time_s + 0.1)  # a control step between two odometry readings
+            trace.append((ahead.time_s, ahead.east_m, ahead.heading_rad))
     return trace
 
 
