@@ -120,6 +120,8 @@ class Daemon:
         self.lockstep = False
         self.ticks = ControlTicks(lambda: self.period_s)
         self._released = False
+        self._gcs_readable = True
+        """Whether the last wait found the GCS socket readable (or did not wait): its next poll reads it."""
         self._rx_perf: float | None = None
         self._marker_wall_s = 0.0
         self._silent_neutral_wall_s = 0.0
@@ -344,15 +346,19 @@ class Daemon:
             self._request_streams()  # the rover's rangefinders are known now: budget them
         self._check_streams()
         self._report_link()
-        self.gcs.poll(time.monotonic())
+        self.gcs.poll(time.monotonic(), readable=self._gcs_readable)
         self.table.flush()  # parameters set from a ground station: written at most every gcs.param_save_s
         self._note_gcs_heartbeat()
         self._send_telemetry()
         # Sleep until the next message even after a busy turn (a turn that only finds the sockets
         # empty costs as much as a short one), unless messages already read are waiting.
+        gcs_fd = getattr(self.gcs.conn, "fd", None)
+        if link.backlog or gcs_fd is None:
+            self._gcs_readable = True
         if not link.backlog:
-            fds = [fd for fd in (link.fileno(), getattr(self.gcs.conn, "fd", None)) if fd is not None]
-            select.select(fds, [], [], self.settings.idle_wait_s)
+            fds = [fd for fd in (link.fileno(), gcs_fd) if fd is not None]
+            ready, _, _ = select.select(fds, [], [], self.settings.idle_wait_s)
+            self._gcs_readable = gcs_fd is None or gcs_fd in ready
 
     def _on_item(self, item: Any) -> None:
         if isinstance(item, WheelDistance):

@@ -226,12 +226,15 @@ class GcsLink:
 
     # ---------------------------------------------------------------- loop
 
-    def poll(self, now_s: float) -> None:
-        """Read and dispatch every pending message, then send what is due. Never blocks."""
+    def poll(self, now_s: float, readable: bool = True) -> None:
+        """Read and dispatch every pending message, then send what is due. Never blocks.
+        ``readable=False``: the caller's ``select`` found nothing waiting on the socket, so only
+        frames the parser already holds are read (no system call for nothing)."""
         state = self.handlers.state()
         self.service.vehicle_home = state.home
         self.service.mission_state = state.mission_state
-        for _ in range(self.params.max_messages_per_poll):  # a flood must not starve the control loop
+        reads = self.params.max_messages_per_poll if readable or self.conn.mav.buf_len() else 0
+        for _ in range(reads):  # a flood must not starve the control loop
             try:
                 msg = self._receive()
             except OSError as exc:  # a socket error (ICMP-reported, reset): the next turn tries again

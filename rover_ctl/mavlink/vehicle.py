@@ -280,6 +280,8 @@ class VehicleLink:
                 return None
 
         self.conn.write = guarded_write
+        self._byte_stream = isinstance(self.conn, (mavutil.mavtcp, mavutil.mavtcpin, mavutil.mavserial))
+        """TCP or a serial line (a read returns what is waiting), not datagrams (one per read)."""
         self.url = url
         self.target_system = 1
         self.target_component = 1
@@ -348,13 +350,21 @@ class VehicleLink:
         if self.link_error is not None and self._wall() < self._retry_wall_s:
             return items
         decoded = reads = 0
+        drained = False
         while decoded < max_frames:
             if not self._parsed:
                 # A read may hold no whole frame (a partial one, bytes a line corrupted); bounded,
                 # so that a stream of junk cannot keep the loop from its step and its failsafes.
                 reads += 1
-                if reads > MAX_READS_PER_POLL or not self._read():
+                if drained or reads > MAX_READS_PER_POLL:
                     break
+                got = self._read()
+                if not got:
+                    break
+                # A byte stream (TCP, a serial line) read short has nothing more waiting: one more
+                # read would only come back empty (a system call and pymavlink's EAGAIN exception
+                # every loop turn). A datagram socket reads one datagram at a time.
+                drained = self._byte_stream and got < READ_SIZE_BYTES
                 continue
             msg = self._parsed.popleft()
             decoded += 1
@@ -393,16 +403,16 @@ class VehicleLink:
         kept.reverse()
         return kept
 
-    def _read(self) -> bool:
-        """One read of everything waiting, parsed; False when nothing came (or the link failed)."""
+    def _read(self) -> int:
+        """One read of everything waiting, parsed; the bytes read (0: nothing came, or the link failed)."""
         conn = self.conn
         try:
             data = conn.recv(READ_SIZE_BYTES)
         except OSError as exc:  # the connection itself failed (peer gone, port vanished)
             self._down(exc)
-            return False
+            return 0
         if not data:
-            return False
+            return 0
         self.link_error = None
         data = bytes(data) if not isinstance(data, bytes) else data
         self.rx_bytes += len(data)
@@ -429,7 +439,7 @@ class VehicleLink:
             for hook in conn.message_hooks:
                 hook(conn, msg)
             self._parsed.append(msg)
-        return True
+        return len(data)
 
     def _down(self, exc: OSError) -> None:
         self.link_error = str(exc) or type(exc).__name__

@@ -396,3 +396,29 @@ def test_a_long_vehicle_text_in_chunks_is_one_text(pair):
     vehicle.mav.statustext_send(mav.MAV_SEVERITY_CRITICAL, data[50:], 7, 1)
     item = drain(link, VehicleText)
     assert (item.text, item.severity) == (text, mav.MAV_SEVERITY_CRITICAL)
+
+
+def test_a_tcp_read_that_comes_back_short_ends_the_poll():
+    """A byte stream read short has nothing more waiting: the poll does not read again only to
+    find it empty (a system call and pymavlink's EAGAIN exception every loop turn)."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    link = VehicleLink(f"tcp:127.0.0.1:{server.getsockname()[1]}", LinkParams())
+    peer, _ = server.accept()
+    try:
+        vehicle = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+        frames = [vehicle.attitude_encode(1000 + k, 0.0, 0.0, 0.1 * k, 0.0, 0.0, 0.0).pack(vehicle) for k in range(3)]
+        peer.sendall(b"".join(frames))
+        link.wait_readable(2.0)  # one short sendall on loopback: one segment, all of it there
+        reads = []
+        recv = link.conn.recv
+        link.conn.recv = lambda n=None: reads.append(n) or recv(n)
+        items = link.poll()
+        assert [type(i) for i in items] == [Attitude] and items[0].yaw_rad == pytest.approx(0.2)  # coalesced: the newest
+        assert len(reads) == 1
+        assert link.poll() == [] and len(reads) == 2  # the next turn reads again
+    finally:
+        link.close()
+        peer.close()
+        server.close()

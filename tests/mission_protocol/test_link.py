@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+import select
 import time
 
 import pytest
@@ -300,3 +301,37 @@ def test_pose_due_tells_without_taking_the_slot(url):
         assert link.pose_due(10.0)
     finally:
         link.close()
+
+
+def test_a_poll_told_the_socket_is_empty_reads_only_what_the_parser_holds(url, udp_port):
+    """``poll(readable=False)`` (the daemon's select found nothing on the socket) hands over the
+    frames already read, from a datagram that held more than one poll takes, and does not call
+    recv for nothing; the frame that arrives meanwhile waits for a readable poll."""
+    link = GcsLink(url, GcsParams(max_messages_per_poll=1))
+    ground = gcs(udp_port)
+    try:
+        heartbeat = mav.MAVLink_heartbeat_message(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+        ground.write(heartbeat.pack(ground.mav) + heartbeat.pack(ground.mav))  # two frames, one datagram
+        reads = []
+        recv = link.conn.recv
+        link.conn.recv = lambda n=None: reads.append(n) or recv(n)
+        deadline = time.monotonic() + 2.0
+        while link.last_gcs_heartbeat_s is None and time.monotonic() < deadline:
+            link.poll(time.monotonic())
+        first = link.last_gcs_heartbeat_s
+        assert first is not None and link.conn.mav.buf_len() > 0  # the second frame waits in the parser
+        before = len(reads)
+        link.poll(time.monotonic() + 0.01, readable=False)
+        assert link.last_gcs_heartbeat_s != first  # the held frame was handled
+        ground.write(heartbeat.pack(ground.mav))
+        assert select.select([link.conn.port], [], [], 2.0)[0]  # it is there to be read
+        link.poll(time.monotonic() + 0.02, readable=False)
+        # One recv in the two polls: the first one's, which DatagramFraming answers with no bytes
+        # so that the parser hands over the frame it holds; none for the socket.
+        assert len(reads) == before + 1
+        handled = link.last_gcs_heartbeat_s
+        link.poll(time.monotonic() + 0.03)
+        assert link.last_gcs_heartbeat_s != handled  # read once told the socket is readable
+    finally:
+        link.close()
+        ground.close()
