@@ -353,8 +353,7 @@ class Daemon:
         # Sleep until the next message even after a busy turn (a turn that only finds the sockets
         # empty costs as much as a short one), unless messages already read are waiting.
         gcs_fd = getattr(self.gcs.conn, "fd", None)
-        if link.backlog or gcs_fd is None:
-            self._gcs_readable = True
+        self._gcs_readable = True
         if not link.backlog:
             fds = [fd for fd in (link.fileno(), gcs_fd) if fd is not None]
             ready, _, _ = select.select(fds, [], [], self.settings.idle_wait_s)
