@@ -431,8 +431,8 @@ class DaemonParams:
     sensor_rate_hz: float = 50.0
     """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE. At 25 Hz (the control rate) the
     daemon needs about 30% less CPU per step and the pose is as good, but HOLD no longer stops the
-    rover dead: the wheel-speed loop, measuring at half the rate, lets it creep at 1-6 cm/s for a
-    second (docs/daemon.md, "On a companion computer")."""
+    rover dead: the brake, judged by speeds measured at half the rate, stays on past the stop and
+    the rover drifts back at 1-6 cm/s for a second (docs/daemon.md, "On a companion computer")."""
     gps_rate_hz: float = 5.0
     """Rate asked of the vehicle for GPS_RAW_INT."""
     rangefinder_rate_hz: float = 20.0
