@@ -278,11 +278,9 @@ class PoseEstimator:
         yaw_rate_radps = self._rate_input_radps(time_s) - bias
         params = self.params
         if at_s is not None and 0.0 < at_s - time_s <= params.pose_max_lead_s:
-            lead_s = at_s - time_s
-            mid = heading_rad + 0.5 * yaw_rate_radps * lead_s
-            east_m += speed_mps * lead_s * math.cos(mid)
-            north_m += speed_mps * lead_s * math.sin(mid)
-            heading_rad = wrap_pi(heading_rad + yaw_rate_radps * lead_s)
+            # The mean only; the Jacobian buffer is scratch, rewritten at every prediction.
+            ahead, _ = motion_model(self._kf.x, at_s - time_s, self._rate_input_radps(time_s), self._jacobian)
+            east_m, north_m, heading_rad = ahead.item(E), ahead.item(N), ahead.item(PSI)
             time_s = float(at_s)
         cov = self._kf.P[:3, :3].copy()
         var_e, cov_en, var_psi, var_n = cov.item(0, 0), cov.item(0, 1), cov.item(2, 2), cov.item(1, 1)
