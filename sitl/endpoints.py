@@ -61,10 +61,19 @@ class _Peer:
         self.outbox: list[bytes] = []
         """Packed messages not yet written."""
         self.mav = _parser()
+        self.marker_mav = _parser()
+        """Packs the lockstep markers, which number on a sequence of their own (as the serial
+        line's, which bypass its queue): a controller skips them, and the vehicle's frames it
+        counts must then run without gaps, or it reads every marker as a lost frame."""
 
     def pack(self, msg) -> bytes:
         buf = msg.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256
+        return buf
+
+    def pack_marker(self, msg) -> bytes:
+        buf = msg.pack(self.marker_mav)
+        self.marker_mav.seq = (self.marker_mav.seq + 1) % 256
         return buf
 
 
@@ -92,7 +101,8 @@ class Endpoint:
     def send_marker(self, msg, repeat: bool = False) -> None:
         """Queue the lockstep marker (TIMESYNC) for every peer; it goes after what is queued.
         ``repeat``: the same marker again, unanswered after a first repeat too."""
-        self.send(msg)
+        for peer in self.peers:
+            peer.outbox.append(peer.pack_marker(msg))
 
     def arrivals(self) -> Iterator[tuple[object, _Peer]]:
         """Messages that became due without anything to read (a line delivering in sim time)."""

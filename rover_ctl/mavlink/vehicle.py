@@ -463,7 +463,12 @@ class VehicleLink:
             return None  # another system on a shared link (a second GCS, a companion computer)
         self.frames_received += 1
         source = (msg.get_srcSystem(), msg.get_srcComponent())
-        if not (kind == "TIMESYNC" and source == self.lockstep_source):  # markers have a sequence of their own
+        # Lockstep markers (TIMESYNC requests) number on a sequence of their own
+        # (docs/architecture.md, "Lockstep handshake"): until the vehicle's AUTOPILOT_VERSION says
+        # it is no lockstep emulator, a TIMESYNC request stays out of the link's sequence count.
+        # (ArduPilot's latency probe, one every 10 s, shares the vehicle's sequence: skipped before
+        # that answer, it reads as one frame lost.)
+        if not (kind == "TIMESYNC" and msg.tc1 == 0 and (self.version is None or self.version.lockstep)):
             self.health.frame(self.vehicle_time_s, kind, source, msg.get_seq(), len(msg.get_msgbuf()))
         if kind == "TIMESYNC":
             if msg.tc1 != 0:

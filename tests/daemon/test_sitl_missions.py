@@ -51,6 +51,8 @@ def test_jump_mission_completes_around_an_obstacle(tmp_path):
     assert metrics["waypoints_reached"] == metrics["waypoints_total"] == 3
     events = read_jsonl(out / "events.jsonl")
     assert [e["seq"] for e in events if e["type"] == "reached"] == [1, 2, 1, 2, 4]  # the jump, taken once
+    # Lockstep over TCP loses nothing, and the link health says so (the markers number apart).
+    assert [e["lost"] for e in events if e["type"] == "link"][-1] == 0
     # The drum was on the way (the rover passed near it) and the rover went around it.
     frame = LocalFrame(*HOME)
     clearance = min(

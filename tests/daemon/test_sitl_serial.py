@@ -39,6 +39,8 @@ def test_a_57600_radio_carries_the_mission_without_dropping_a_byte(tmp_path):
     plans = [r for r in read_jsonl(tmp_path / "run" / "events.jsonl") if r["type"] == "link_plan"]
     assert plans and plans[-1]["source"] == "57600 baud" and plans[-1]["bytes_per_s"] <= 0.7 * 5760
     assert plans[-1]["rates_hz"]["SIMSTATE"] == 0  # evaluation only: no room for it on a radio
+    health = [r for r in read_jsonl(tmp_path / "run" / "events.jsonl") if r["type"] == "link"]
+    assert health and health[-1]["lost"] == 0  # nothing dropped, nothing counted lost (the markers number apart)
 
 
 def test_a_noisy_115200_line_still_carries_the_mission_and_the_errors_are_counted(tmp_path):

@@ -203,3 +203,18 @@ def test_tcp_endpoint_connects_out_to_a_listening_controller(tcp_port: int) -> N
 
 def test_tcp_endpoint_refused_is_an_error(capsys, tcp_port: int) -> None:
     assert "cannot connect" in main_error_line(capsys, "--endpoint", f"tcp:127.0.0.1:{tcp_port}", "--duration-s", "0")
+
+
+@pytest.mark.parametrize("over", ["tcp", "pty"])
+def test_the_vehicles_frames_number_without_gaps_between_the_lockstep_markers(over: str) -> None:
+    """A controller skips the markers; the vehicle's own frames must then run on without gaps in
+    their sequence, or it reads every marker as a frame lost (a fifth of them at 50 Hz)."""
+    with rover_sitl("--lockstep", *(["--pty"] if over == "pty" else [])) as sitl:
+        client = lockstep_client(sitl.pty_device if over == "pty" else sitl.url)
+        client.arm()
+        received = collect(client, 2.0, lambda t: (1600, 1500))
+        client.close()
+    seqs = [m.get_seq() for _, m in received if m.get_type() != "TIMESYNC" and (m.get_srcSystem(), m.get_srcComponent()) == (1, 1)]
+    assert len(seqs) > 400
+    gaps = sum((b - a - 1) % 256 for a, b in zip(seqs, seqs[1:]))
+    assert gaps == 0
