@@ -66,14 +66,11 @@ class _Peer:
         line's, which bypass its queue): a controller skips them, and the vehicle's frames it
         counts must then run without gaps, or it reads every marker as a lost frame."""
 
-    def pack(self, msg) -> bytes:
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
-        return buf
-
-    def pack_marker(self, msg) -> bytes:
-        buf = msg.pack(self.marker_mav)
-        self.marker_mav.seq = (self.marker_mav.seq + 1) % 256
+    def pack(self, msg, marker: bool = False) -> bytes:
+        """``msg`` framed on the vehicle's sequence, or with ``marker`` on the markers' own."""
+        mav = self.marker_mav if marker else self.mav
+        buf = msg.pack(mav)
+        mav.seq = (mav.seq + 1) % 256
         return buf
 
 
@@ -102,7 +99,7 @@ class Endpoint:
         """Queue the lockstep marker (TIMESYNC) for every peer; it goes after what is queued.
         ``repeat``: the same marker again, unanswered after a first repeat too."""
         for peer in self.peers:
-            peer.outbox.append(peer.pack_marker(msg))
+            peer.outbox.append(peer.pack(msg, marker=True))
 
     def arrivals(self) -> Iterator[tuple[object, _Peer]]:
         """Messages that became due without anything to read (a line delivering in sim time)."""

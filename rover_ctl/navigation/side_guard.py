@@ -21,11 +21,11 @@ its heading, docs/perception.md "Flank contacts").
 which the autopilot adds to the rule base's wheel setpoints as a speed difference of
 ``yaw rate * track`` (half to each wheel), the forward speed unchanged: a rover a yield holds
 still pivots away in place, and near full speed the faster wheel meets its limit, where the wheel
-loop saturates and the turn is smaller. A rangefinder the rover
-lacks, or one silent and left out by the failsafe, pushes nothing: the failsafe slows the rover for
-it already. A rover driving at 1 m/s along a wall 0.22 m from its side turns away by 18
-degrees until the wall reads beyond ``range_m`` (tests/navigator/test_side_guard.py); the rule base
-then steers it back towards its target.
+loop saturates and the turn is smaller. A rangefinder the rover lacks, or one silent and left out
+by the failsafe, pushes nothing: the failsafe slows the rover for it already. A rover driving at
+1 m/s along a wall 0.22 m from its side turns away by 18 degrees until the wall reads beyond
+``range_m`` (tests/navigator/test_side_guard.py); the rule base then steers it back towards its
+target.
 """
 
 from __future__ import annotations
