@@ -391,6 +391,12 @@ class WheelControlParams:
     """Low-pass time constant on wheel speeds measured from WHEEL_DISTANCE deltas."""
     measurement_timeout_s: float = 0.3
     """Wheel speeds older than this are not trusted: feed-forward only."""
+    brake_release_rpm: float = 3.5
+    """Braking to a stop lets a wheel go (output 0) once its lag-corrected speed is below this
+    (0.026 m/s at the 0.07 m wheel). With odometry at 25 Hz, stopping from 1.2 m/s against the
+    emulator: at 0 the brake held on into reverse in 3 of 5 stops (up to 0.033 m/s backwards); at
+    the 6.8 rpm of ``daemon.hold_speed_mps`` the rover still rolled at up to 0.022 m/s half a
+    second after HOLD; at this value 0.004-0.024 m/s, at most 0.024 m/s backwards (6 stops)."""
     rc_trim_us: int = 1500
     """RC neutral (ArduPilot RC1/RC3_TRIM)."""
     rc_range_us: int = 500
@@ -428,11 +434,11 @@ class DaemonParams:
     """Vehicle COMMAND_LONG answered by no COMMAND_ACK within this is sent again."""
     command_retries: int = 3
     """Re-sends of an unanswered vehicle command before it counts as failed."""
-    sensor_rate_hz: float = 50.0
-    """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE. At 25 Hz (the control rate) the
-    daemon needs about 30% less CPU per step and the pose is as good, but HOLD no longer stops the
-    rover dead: the brake, judged by speeds measured at half the rate, stays on past the stop and
-    the rover drifts back at 1-6 cm/s for a second (docs/daemon.md, "On a companion computer")."""
+    sensor_rate_hz: float = 25.0
+    """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE: the control rate. At 50 Hz the
+    daemon needs about 40% more CPU per step for the same pose (docs/daemon.md, "On a companion
+    computer"); the estimator integrates between readings and predicts the pose to each step, and
+    the brake corrects the wheel speeds for their lag."""
     gps_rate_hz: float = 5.0
     """Rate asked of the vehicle for GPS_RAW_INT."""
     rangefinder_rate_hz: float = 20.0

@@ -304,6 +304,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("wheel_control.integral_limit", "WHL_IMAX", 0.0, 1.0, RW, {}),
     ("wheel_control.speed_filter_tau_s", "WHL_FILT_TAU", 0.0, 5.0, RW, {}),
     ("wheel_control.measurement_timeout_s", "WHL_MEAS_TIMEOUT", 0.01, 10.0, RW, {}),
+    ("wheel_control.brake_release_rpm", "WHL_BRAKE_REL", 0.0, 100.0, RW, {"units": "rpm"}),
     ("wheel_control.rc_trim_us", "WHL_RC_TRIM", 800, 2200, RW, {}),
     ("wheel_control.rc_range_us", "WHL_RC_RANGE", 100, 1000, RW, {}),
     ("wheel_control.rc_deadzone_us", "WHL_RC_DZ", 0, 200, RW, {}),

@@ -103,7 +103,7 @@ class _Stream:
     next_s: float = 0.0
 
 
-def _next_slot(slot_s: float, period_s: float, t_s: float) -> float:
+def next_slot(slot_s: float, period_s: float, t_s: float) -> float:
     """The first slot of the grid ``slot_s + n * period_s`` after ``t_s`` (slots missed by a coarse frame are skipped)."""
     return slot_s + period_s * max(1, math.floor((t_s + 1e-9 - slot_s) / period_s) + 1)
 
@@ -313,7 +313,7 @@ class MavlinkVehicle:
         """Read each sensor due at ``t_s`` at its own rate (the autopilot's drivers run whatever is streamed)."""
         due = [name for name, next_s in self.sensor_next_s.items() if t_s + 1e-9 >= next_s]
         for name in due:
-            self.sensor_next_s[name] = _next_slot(self.sensor_next_s[name], self.sensor_periods_s[name], t_s)
+            self.sensor_next_s[name] = next_slot(self.sensor_next_s[name], self.sensor_periods_s[name], t_s)
         if "gps" in due:
             self.gps = self.rover.gps()
             if self.on_gps is not None:
@@ -333,7 +333,7 @@ class MavlinkVehicle:
         for name, stream in self.streams.items():
             if stream.interval_s is None or t_s + 1e-9 < stream.next_s:
                 continue
-            stream.next_s = _next_slot(stream.next_s, stream.interval_s, t_s)
+            stream.next_s = next_slot(stream.next_s, stream.interval_s, t_s)
             out.extend(builders[name](t_s))
         return out
 

@@ -634,9 +634,12 @@ class Autopilot:
         return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0
 
     def _hold(self, t_s: float, dt_s: float, pose: Pose | None) -> WheelCommand:
-        """Stop: brake actively (zero wheel-speed setpoints) while moving, then neutral."""
+        """Stop: brake actively while moving, until the wheels are about to stand (the wheel
+        controller's ``brake``), then neutral."""
         if pose is not None and abs(pose.speed_mps) > self.config.daemon.hold_speed_mps:
-            return self.wheels.step(t_s, dt_s, 0.0, 0.0)
+            command = self.wheels.brake(t_s, dt_s)
+            if command is not None:
+                return command
         return self.wheels.neutral()
 
     # ---- modes and the mission -----------------------------------------------------------------

@@ -28,7 +28,9 @@ test (tests/tune/test_episode.py) states:
   retries arming every 0.2 wall seconds, which in lockstep is a variable number of sim seconds);
   an arming the vehicle accepts reaches the autopilot at once (the daemon takes the vehicle's
   ACCEPTED as armed), and from then on the armed flag with each 1 Hz heartbeat, as over the wire;
-- measured link rates are the emulator's stream rates (the daemon measures them).
+- measured link rates are the stream rates (the daemon measures them); ATTITUDE and WHEEL_DISTANCE
+  come on a grid at ``daemon.sensor_rate_hz`` from t = 0, the newest sample each (the emulator's
+  grid starts when the daemon asks).
 
 ``start_s``: the ground station arms and starts the mission no earlier than this sim time (a
 comparison with a SITL run starts when that run did: moving obstacles move on sim time).
@@ -55,7 +57,7 @@ from rover_ctl.fuzzy import RuleBase
 from rover_ctl.mission.model import GLOBAL_XY_SCALE, Home, Mission, MissionItem
 from rover_ctl.tuning import scenarios as scenario_defs
 from rover_ctl.vocabulary import RoverMode, mav
-from sitl.mavlink_vehicle import STEERING_CHANNEL, THROTTLE_CHANNEL, LinkParams, MavlinkVehicle
+from sitl.mavlink_vehicle import STEERING_CHANNEL, THROTTLE_CHANNEL, LinkParams, MavlinkVehicle, next_slot
 from sitl.params import RANGEFINDER_SETS, SitlParams
 from sitl.vehicle import SimRover
 from sitl.world import Home as SitlHome
@@ -150,7 +152,11 @@ class Episode:
         self.frame: LocalFrame | None = None
         self.ranges: dict[int, RangeReading] = {}
         self.last_fix_s: float | None = None
-        self.rates_hz = {"ATTITUDE": params.imu.rate_hz, "WHEEL_DISTANCE": params.encoder.rate_hz}
+        odometry_hz = self.config.daemon.sensor_rate_hz
+        self.odometry_period_s = 1.0 / odometry_hz if odometry_hz > 0 else None
+        """ATTITUDE and WHEEL_DISTANCE come at the rate the daemon asks for, the newest sample each."""
+        self._next_odometry_s = 0.0
+        self.rates_hz = {"ATTITUDE": min(params.imu.rate_hz, odometry_hz), "WHEEL_DISTANCE": min(params.encoder.rate_hz, odometry_hz)}
         self.period_s = 1.0 / self.config.daemon.control_rate_hz
         self.ticks = ControlTicks(lambda: self.period_s)
         self.arm_sent = False
@@ -216,27 +222,30 @@ class Episode:
         v = self.vehicle
         if v.armed:  # world motions that start at arming (as sitl.main's frame loop)
             self.rover.world.armed(t_s)
-        before = (v.gps, v.attitude, v.ranges, v.wheels)
+        before = (v.gps, v.ranges)
         v.sample_sensors(t_s)
+        odometry = self.odometry_period_s is not None and t_s + 1e-9 >= self._next_odometry_s
+        if odometry:
+            self._next_odometry_s = next_slot(self._next_odometry_s, self.odometry_period_s, t_s)
         if t_s + 1e-9 >= self._next_heartbeat_s:
             self._next_heartbeat_s += HEARTBEAT_PERIOD_S
             self.autopilot.on_vehicle(v.armed)
         if v.gps is not before[0]:
             self._on_gps(v.gps, t_s)
-        if v.attitude is not before[1] and v.attitude is not None:
+        if odometry and v.attitude is not None:
             a = v.attitude
             reading = Attitude(int(t_s * 1000) / 1000.0, math.remainder(a.yaw_rad, math.tau), a.yaw_rate_radps)
             self.autopilot.on_attitude(reading)
             if self.estimator:
                 self.estimator.on_attitude(reading)
-        if v.ranges is not before[2]:
+        if v.ranges is not before[1]:
             for s in v.ranges:
                 max_cm = int(round(s.max_m * 100))
                 current_cm = max_cm + 1 if s.range_m is None else int(round(s.range_m * 100))
                 self.ranges[s.orientation] = RangeReading(int(t_s * 1000) / 1000.0, s.sensor_id, s.orientation,
                                                           math.inf if current_cm > max_cm else current_cm / 100.0,
                                                           int(round(s.min_m * 100)) / 100.0, max_cm / 100.0)  # fmt: skip
-        if v.wheels is not before[3] and v.wheels is not None:
+        if odometry and v.wheels is not None:
             reading = WheelDistance(round(t_s * 1e6) / 1e6, v.wheels.left_m, v.wheels.right_m)
             self.autopilot.on_wheels(reading)
             if self.estimator:

@@ -106,3 +106,47 @@ def test_stale_measurements_fall_back_to_feed_forward():
     cmd = controller.step(5.0, 0.04, 125.0, 125.0)  # wheel data 5 s old
     assert cmd.left_out == pytest.approx(125.0 / P.full_output_rpm)
     assert controller.neutral().throttle_us == P.rc_trim_us
+
+
+def stop_from_cruise(reading_hz: float, phase_s: float) -> list[float]:
+    """The emulator's drive train (its DC motors, mixer and body) at 1.2 m/s, then the brake at
+    25 Hz with wheel readings at ``reading_hz``, the first control step ``phase_s`` after a
+    reading; neutral once the brake lets go. Returns the forward speed (m/s) every 10 ms from the
+    moment the brake starts."""
+    physics = pytest.importorskip("sitl.physics")
+    params = pytest.importorskip("sitl.params")
+    mixer = pytest.importorskip("sitl.mixer")
+    sitl = params.SitlParams()
+    drive = physics.DriveTrain(sitl.motor, sitl.robot, sitl.physics_dt_s)
+    radius_m = sitl.robot.wheel_radius_m
+    controller = WheelController(radius_m, P)
+
+    def apply(command) -> None:
+        left_us, right_us = mixer.mix_rc(command.steering_us, command.throttle_us)
+        drive.set_volts(drive.pwm_to_volts(left_us), drive.pwm_to_volts(right_us))
+
+    step_ms, reading_ms = 40, round(1000 / reading_hz)
+    speeds, braking = [], False
+    for t_ms in range(0, 6000):
+        t_s = t_ms / 1000
+        if t_ms % reading_ms == 0:
+            controller.on_wheels(WheelDistance(t_s, drive.angle_l_rad * radius_m, drive.angle_r_rad * radius_m))
+        if t_ms % step_ms == round(phase_s * 1000) % step_ms:
+            braking = braking or t_ms >= 4000
+            if not braking:
+                apply(controller.step(t_s, step_ms / 1000, 160.0, 160.0))
+            else:
+                apply(controller.brake(t_s, step_ms / 1000) or controller.neutral())
+        if braking and t_ms % 10 == 0:
+            speeds.append(drive.speed_mps)
+        drive.advance(1)
+    return speeds
+
+
+@pytest.mark.parametrize("reading_hz", [25.0, 50.0])
+@pytest.mark.parametrize("phase_s", [0.0, 0.01, 0.02, 0.03])
+def test_the_brake_stops_the_wheels_without_driving_them_backwards(reading_hz, phase_s):
+    speeds = stop_from_cruise(reading_hz, phase_s)
+    assert speeds[0] > 1.1
+    assert min(speeds) > -0.02  # never pushed through the stop into reverse
+    assert max(abs(v) for v in speeds[50:]) < 0.03  # standing half a second after the brake

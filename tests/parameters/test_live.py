@@ -165,6 +165,14 @@ def ex_wheels(d: Daemon) -> list:
             wheels.on_wheels(WheelDistance(t, left, right))
         cmd = wheels.step(t, 0.02, 150.0 if k < 200 else -40.0, 120.0 if k < 200 else 40.0)
         trace.append(dataclasses.astuple(cmd) + (wheels.meter.left_rpm, wheels.meter.right_rpm))
+    for k in range(30):  # braking from 0.6 m/s at 3 m/s^2
+        t = 5.0 + k * 0.02
+        speed = max(0.0, 0.6 - 3.0 * k * 0.02)
+        left += speed * 0.02
+        right += speed * 0.02
+        wheels.on_wheels(WheelDistance(t, left, right))
+        cmd = wheels.brake(t, 0.02)
+        trace.append(None if cmd is None else dataclasses.astuple(cmd))
     return trace
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from sitl.clock import MARKER_RESEND_S, FrameClock, LockstepMarker, Pacer
 from sitl.endpoints import mavlink
-from sitl.mavlink_vehicle import _next_slot
+from sitl.mavlink_vehicle import next_slot
 
 
 def test_frame_clock_is_exact_in_nanoseconds() -> None:
@@ -41,5 +41,5 @@ def test_marker_answer_and_resend() -> None:
 
 
 def test_stream_slots_skip_missed_ones() -> None:
-    assert _next_slot(0.0, 0.2, 0.0) == pytest.approx(0.2)
-    assert _next_slot(0.2, 0.2, 1.0) == pytest.approx(1.2)  # a coarse frame does not cause a burst
+    assert next_slot(0.0, 0.2, 0.0) == pytest.approx(0.2)
+    assert next_slot(0.2, 0.2, 1.0) == pytest.approx(1.2)  # a coarse frame does not cause a burst
