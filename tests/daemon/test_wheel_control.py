@@ -108,11 +108,11 @@ def test_stale_measurements_fall_back_to_feed_forward():
     assert controller.neutral().throttle_us == P.rc_trim_us
 
 
-def stop_from_cruise(reading_hz: float, phase_s: float) -> list[float]:
-    """The emulator's drive train (its DC motors, mixer and body) at 1.2 m/s, then the brake at
-    25 Hz with wheel readings at ``reading_hz``, the first control step ``phase_s`` after a
-    reading; neutral once the brake lets go. Returns the forward speed (m/s) every 10 ms from the
-    moment the brake starts."""
+def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[float, float] = (160.0, 160.0)) -> list[tuple[float, float]]:
+    """The emulator's drive train (its DC motors, mixer and body) driven at ``setpoints_rpm`` for
+    4 s (160 rpm: 1.2 m/s), then the brake at 25 Hz with wheel readings at ``reading_hz``, the first
+    control step ``phase_s`` after a reading; neutral once the brake lets go. Returns the left and
+    right wheel rim speeds (m/s) every 10 ms from the moment the brake starts."""
     physics = pytest.importorskip("sitl.physics")
     params = pytest.importorskip("sitl.params")
     mixer = pytest.importorskip("sitl.mixer")
@@ -134,19 +134,32 @@ def stop_from_cruise(reading_hz: float, phase_s: float) -> list[float]:
         if t_ms % step_ms == round(phase_s * 1000) % step_ms:
             braking = braking or t_ms >= 4000
             if not braking:
-                apply(controller.step(t_s, step_ms / 1000, 160.0, 160.0))
+                apply(controller.step(t_s, step_ms / 1000, *setpoints_rpm))
             else:
                 apply(controller.brake(t_s, step_ms / 1000) or controller.neutral())
         if braking and t_ms % 10 == 0:
-            speeds.append(drive.speed_mps)
+            speeds.append((drive.wheel_l_radps * radius_m, drive.wheel_r_radps * radius_m))
         drive.advance(1)
     return speeds
 
 
 @pytest.mark.parametrize("reading_hz", [25.0, 50.0])
 @pytest.mark.parametrize("phase_s", [0.0, 0.01, 0.02, 0.03])
-def test_the_brake_stops_the_wheels_without_driving_them_backwards(reading_hz, phase_s):
-    speeds = stop_from_cruise(reading_hz, phase_s)
-    assert speeds[0] > 1.1
-    assert min(speeds) > -0.02  # never pushed through the stop into reverse
-    assert max(abs(v) for v in speeds[50:]) < 0.03  # standing half a second after the brake
+@pytest.mark.parametrize("setpoints_rpm", [(160.0, 160.0), (120.0, -120.0)], ids=["straight", "pivot"])
+def test_the_brake_stops_the_wheels_without_driving_them_backwards(reading_hz, phase_s, setpoints_rpm):
+    speeds = stop_from_cruise(reading_hz, phase_s, setpoints_rpm)
+    for wheel, setpoint in enumerate(setpoints_rpm):
+        direction = math.copysign(1.0, setpoint)
+        along = [direction * v[wheel] for v in speeds]  # positive: the way the wheel was turning
+        assert along[0] > 0.8
+        assert min(along) > -0.02  # never pushed through the stop into reverse
+        assert max(abs(v) for v in along[50:]) < 0.03  # standing half a second after the brake
+
+
+def test_without_fresh_wheel_readings_the_brake_leaves_the_stop_to_neutral():
+    controller = WheelController(RADIUS_M, P)
+    assert controller.brake(0.0, 0.04) is None  # no reading yet
+    controller.on_wheels(WheelDistance(0.0, 0.0, 0.0))
+    controller.on_wheels(WheelDistance(0.02, 0.02, 0.02))  # 1 m/s
+    assert controller.brake(0.04, 0.04) is not None
+    assert controller.brake(0.02 + P.measurement_timeout_s + 0.01, 0.04) is None  # readings gone stale
