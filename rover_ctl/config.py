@@ -436,9 +436,10 @@ class DaemonParams:
     """Re-sends of an unanswered vehicle command before it counts as failed."""
     sensor_rate_hz: float = 25.0
     """Rate asked for ATTITUDE and (through EXTRA1) WHEEL_DISTANCE: the control rate. At 50 Hz the
-    daemon needs about 40% more CPU per step for the same pose (docs/daemon.md, "On a companion
-    computer"); the estimator integrates between readings and predicts the pose to each step, and
-    the brake corrects the wheel speeds for their lag."""
+    daemon reads and filters twice the odometry frames for the same pose (1.75 against 1.22 ms of
+    CPU per step in `bench loop`'s timed runs; docs/daemon.md, "On a companion computer"); the
+    estimator integrates between readings and predicts the pose to each step, and the brake
+    corrects the wheel speeds for their lag."""
     gps_rate_hz: float = 5.0
     """Rate asked of the vehicle for GPS_RAW_INT."""
     rangefinder_rate_hz: float = 20.0

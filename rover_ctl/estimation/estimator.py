@@ -275,11 +275,12 @@ class PoseEstimator:
             return Pose(self._time_s, nan, nan, nan, nan, nan, np.full((3, 3), nan), False, False, nan, nan)
         east_m, north_m, heading_rad, speed_mps, bias = self._kf.x[:5, 0].tolist()
         time_s = float(self._time_s)
-        yaw_rate_radps = self._rate_input_radps(time_s) - bias
+        rate_input_radps = self._rate_input_radps(time_s)
+        yaw_rate_radps = rate_input_radps - bias
         params = self.params
         if at_s is not None and 0.0 < at_s - time_s <= params.pose_max_lead_s:
             # The mean only; the Jacobian buffer is scratch, rewritten at every prediction.
-            ahead, _ = motion_model(self._kf.x, at_s - time_s, self._rate_input_radps(time_s), self._jacobian)
+            ahead, _ = motion_model(self._kf.x, at_s - time_s, rate_input_radps, self._jacobian)
             east_m, north_m, heading_rad = ahead.item(E), ahead.item(N), ahead.item(PSI)
             time_s = float(at_s)
         cov = self._kf.P[:3, :3].copy()
