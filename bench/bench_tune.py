@@ -111,14 +111,18 @@ def record_run(result_path: Path, note: str = "") -> dict[str, Any]:
             lines.append(f"| {row['scenario']} | {r['rulebase'] if label == 'source' else 'tuned'} | {s['episodes']} | {s['success_rate']:.0%} | "
                          f"{s['collisions']} | {s['timeouts']} | {time_s} | {path_m} | {s['score']:.1f} |")  # fmt: skip
     history = r["history"]
-    markdown = "\n".join(lines) + (
+    verdict = [f"Verdict (the run's own, rover_ctl/tuning/verdict.py): **{r['verdict']}**", ""] + [f"- {line}" for line in r["verdict_lines"]] \
+        if "verdict" in r else []  # runs before 2026-11-27 had none
+    seeds = r["holdout_seeds"]
+    shown = f"{seeds}" if len(seeds) <= 10 else f"{len(seeds)} per scenario, drawn from --seed ({', '.join(map(str, seeds[:5]))}, ...; all in the run's report)"
+    markdown = "\n".join(verdict + [""] * bool(verdict) + lines) + (
         f"\n\nThe run: `{r['command']}`: {r['generations']} generations of {r['population']} candidates on "
         f"{r['worlds']} training worlds per scenario ({r['episodes']} episodes, {r['search_sim_s']:.0f} simulated s in "
         f"{r['search_wall_s']:.0f} wall s, {r['search_sim_s'] / r['search_wall_s']:.0f}x real time, on a 2-worker LocalCluster "
         f"of the shared machine), then the held-out check ({r['holdout_wall_s']:.0f} wall s). Training score (mean episode "
         f"cost, lower is better): source {r['source_score']:.1f}, best candidate {r['best']['score']:.1f} (generation "
         f"{r['best']['generation']}); median of the last generation {history[-1]['median']:.1f}. Held-out seeds (never "
-        f"used in the search): {r['holdout_seeds']}. Figures from the in-process runner; the emulator-in-the-loop "
+        f"used in the search): {shown}. Figures from the in-process runner; the emulator-in-the-loop "
         "check is the section \"Navigation: default vs ... (emulator in the loop)\"."
     )
     if note:

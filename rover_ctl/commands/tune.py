@@ -34,7 +34,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--worlds", type=count, default=4, metavar="N", help="training worlds per scenario (default 4)")
     parser.add_argument("--generations", type=count, default=30, metavar="G", help="CMA-ES generations (default 30)")
     parser.add_argument("--population", type=count, default=8, metavar="P", help="candidates per generation (default 8, at least 2)")
-    parser.add_argument("--holdout", type=count, default=10, metavar="N", help="held-out worlds per scenario for the report (default 10)")
+    parser.add_argument("--holdout", type=count, default=100, metavar="N", help="held-out worlds per scenario for the report and its verdict (default 100)")
     parser.add_argument("--seed", type=CMA_SEED, default=1, help="seed of CMA-ES and of the world seeds (default 1)")
     parser.add_argument("--scheduler", type=_scheduler, metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a local cluster)")
     parser.add_argument("--workers", type=count, metavar="N", help="local cluster workers (default: one per core)")
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.live import Live
     from rich.table import Table
 
-    from rover_ctl.app.tune import Progress, TuneError, TuneOptions, command_line, prepare, tune
+    from rover_ctl.app.tune import Progress, TuneError, TuneOptions, command_line, headline, prepare, tune
     from rover_ctl.cli import UserError
     from rover_ctl.config import load_config
 
@@ -90,6 +90,9 @@ def run(args: argparse.Namespace) -> int:
         s, t = row["source"], row["tuned"]
         console.print(f"{row['scenario']}: held-out success {s['success_rate']:.0%} -> {t['success_rate']:.0%}, "
                       f"score {s['score']:.1f} -> {t['score']:.1f}")  # fmt: skip
+    for line in result["verdict_lines"]:
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    console.print(f"verdict: {headline(result['verdict'])}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"tuned rule base: {out / 'tuned.toml'} (use with --rulebase); report: {out / 'report.md'}")
     return 0
 
