@@ -15,7 +15,7 @@ from distributed import LocalCluster
 from rover_ctl.app import tune as app_tune
 from rover_ctl.app.tune import MAX_BATCH, MAX_GENERATIONS, SEED_SPACE, Cluster, TuneError, TuneOptions, check_options, draw_seeds, tune
 from rover_ctl.cli import main
-from rover_ctl.fuzzy import load_rulebase
+from rover_ctl.fuzzy import load_rulebase, parse_rulebase
 from rover_ctl.tuning import scenarios
 from rover_ctl.tuning.genome import Genome, load_document
 
@@ -58,6 +58,12 @@ def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys)
 
     tuned = out / "tuned.toml"
     rulebase = load_rulebase(tuned)
+    # tuned.toml is the search distribution's final mean, not the luckiest sampled candidate
+    with open(out / "checkpoint.pkl", "rb") as f:
+        es = pickle.load(f)["es"]
+    genome = Genome(*load_document("default"))
+    assert result["tuned"]["x"] == [float(v) for v in genome.repaired(np.asarray(es.mean))]
+    assert load_rulebase(tuned).inputs == parse_rulebase(genome.decode_document(np.asarray(es.mean)), "mean").inputs
     assert [v.name for v in rulebase.inputs] == [v.name for v in load_rulebase("default").inputs]
     assert main(["fuzzy", "show", str(tuned)]) == 0  # --rulebase FILE takes it as it takes a shipped name
     report = (out / "report.md").read_text()
