@@ -120,8 +120,9 @@ def record_run(result_path: Path, note: str = "") -> dict[str, Any]:
         f"{r['worlds']} training worlds per scenario ({r['episodes']} episodes, {r['search_sim_s']:.0f} simulated s in "
         f"{r['search_wall_s']:.0f} wall s, {r['search_sim_s'] / r['search_wall_s']:.0f}x real time, on a 2-worker LocalCluster "
         f"of the shared machine), then the held-out check ({r['holdout_wall_s']:.0f} wall s). Training score (mean episode "
-        f"cost, lower is better): source {r['source_score']:.1f}, best candidate {r['best']['score']:.1f} (generation "
-        f"{r['best']['generation']}); median of the last generation {history[-1]['median']:.1f}. Held-out seeds (never "
+        f"cost, lower is better): source {r['source_score']:.1f}, best sampled candidate {r['best']['score']:.1f} (generation "
+        f"{r['best']['generation']}); median of the last generation {history[-1]['median']:.1f}. The tuned rule base: "
+        f"{r.get('tuned', {}).get('what', 'the best sampled candidate')}. Held-out seeds (never "
         f"used in the search): {shown}. Figures from the in-process runner; the emulator-in-the-loop "
         "check is the section \"Navigation: default vs ... (emulator in the loop)\"."
     )
