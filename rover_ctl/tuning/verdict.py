@@ -66,11 +66,6 @@ class ScenarioVerdict:
     p_time_longer: float
     verdict: str
 
-    @property
-    def unseen_failure_rate(self) -> float:
-        """The failure rate a sample of this many worlds with none failing still leaves likely (3 / n)."""
-        return min(1.0, 3.0 / self.worlds) if self.worlds else 1.0
-
 
 def binomial_tail(k: int, n: int) -> float:
     """P(X >= k) for X ~ Binomial(n, 1/2)."""
