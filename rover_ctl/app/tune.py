@@ -14,9 +14,9 @@ One run, in ``TuneOptions.out``:
 3. after every generation ``checkpoint.pkl`` (the CMA-ES state, the history, the best candidate)
    is replaced atomically: the same command resumes where an interrupted run stopped;
 4. at the end the tuned rule base, CMA-ES's final distribution mean (``es.mean``, repaired), and
-   the source rule base are driven on held-out seeds the search never used, and ``rover_ctl.tuning.verdict`` says per scenario
-   whether the tuned base is better, worse, or not shown to differ (paired tests, not the raw
-   rates); ``tuned.toml`` (loads with ``--rulebase FILE``), ``report.md`` (command, seeds,
+   the source rule base are driven on held-out seeds the search never used, and
+   ``rover_ctl.tuning.verdict`` says per scenario whether the tuned base is better, worse, or not
+   shown to differ (paired tests, not the raw rates); ``tuned.toml`` (loads with ``--rulebase FILE``), ``report.md`` (command, seeds,
    verdict, before/after table, convergence), ``convergence.png`` and ``result.json`` are
    written.
 
@@ -57,12 +57,12 @@ from rover_ctl.config import NavigatorParams
 from rover_ctl.fuzzy import parse_rulebase
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.tuning import scenarios as scenario_defs
+from rover_ctl.tuning import verdict as judge
 from rover_ctl.tuning.episode import Outcome
 from rover_ctl.tuning.genome import Genome, load_document
 from rover_ctl.tuning.objective import Weights, score
 from rover_ctl.tuning.tasks import run_episode_task
 from rover_ctl.tuning.toml_file import to_toml
-from rover_ctl.tuning import verdict as judge
 
 CHECKPOINT = "checkpoint.pkl"
 CHECKPOINT_VERSION = 1
@@ -492,7 +492,7 @@ def _write_outputs(o: TuneOptions, state: dict[str, Any], result: dict[str, Any]
         f"on so few worlds is mostly luck (the lowest: generation {best['generation']}, {best['score']:.2f}; the source rule "
         f"base on the same worlds: {state['source_score']:.2f})", "",
         "## Verdict on the held-out worlds", "",
-        f"**{headline(result['verdict'])}** (higher success, or equal success with a shorter time, on every scenario; "
+        f"**{judge.HEADLINES[result['verdict']]}** (higher success, or equal success with a shorter time, on every scenario; "
         f"paired one-sided tests at {result['alpha']:g}: exact McNemar on success, Wilcoxon signed-rank on the times of the worlds "
         "both completed; rover_ctl/tuning/verdict.py)", "",
         *[f"- {line}" for line in result["verdict_lines"]], "",
@@ -512,12 +512,6 @@ def _write_outputs(o: TuneOptions, state: dict[str, Any], result: dict[str, Any]
     for h in state["history"]:
         lines.append(f"| {h['generation']} | {h['best']:.2f} | {h['median']:.2f} | {h['best_so_far']:.2f} | {h['success']:.0%} | {h['episodes']} | {h['wall_s']} |")
     (o.out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
-
-
-def headline(verdict: str) -> str:
-    return {judge.BETTER: "The tuned rule base beats its source on every scenario.",
-            judge.WORSE: "The tuned rule base is worse than its source: do not use it.",
-            judge.NOT_SHOWN: "Not shown better than its source: keep the source."}[verdict]  # fmt: skip
 
 
 def _plot(path: Path, history: list[dict[str, Any]]) -> None:

@@ -50,9 +50,10 @@ def run(args: argparse.Namespace) -> int:
     from rich.live import Live
     from rich.table import Table
 
-    from rover_ctl.app.tune import Progress, TuneError, TuneOptions, command_line, headline, prepare, tune
+    from rover_ctl.app.tune import Progress, TuneError, TuneOptions, command_line, prepare, tune
     from rover_ctl.cli import UserError
     from rover_ctl.config import load_config
+    from rover_ctl.tuning.verdict import HEADLINES
 
     if args.population < 2:
         raise UserError(f"--population {args.population}: CMA-ES needs at least 2 candidates")
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
                       f"score {s['score']:.1f} -> {t['score']:.1f}")  # fmt: skip
     for line in result["verdict_lines"]:
         console.print(line, markup=False, highlight=False, soft_wrap=True)
-    console.print(f"verdict: {headline(result['verdict'])}", markup=False, highlight=False, soft_wrap=True)
+    console.print(f"verdict: {HEADLINES[result['verdict']]}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"tuned rule base: {out / 'tuned.toml'} (use with --rulebase); report: {out / 'report.md'}")
     return 0
 

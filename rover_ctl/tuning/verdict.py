@@ -38,6 +38,12 @@ from typing import Iterable, Sequence
 from rover_ctl.tuning.episode import Outcome
 
 BETTER, WORSE, NOT_SHOWN = "better", "worse", "not shown"
+HEADLINES = {
+    BETTER: "The tuned rule base beats its source on every scenario.",
+    WORSE: "The tuned rule base is worse than its source: do not use it.",
+    NOT_SHOWN: "Not shown better than its source: keep the source.",
+}
+"""What the report and the terminal say for each overall verdict."""
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from rover_ctl.cli import main
 from rover_ctl.fuzzy import load_rulebase, parse_rulebase
 from rover_ctl.tuning import scenarios
 from rover_ctl.tuning.genome import Genome, load_document
+from rover_ctl.tuning.verdict import HEADLINES
 
 SMALL = ["--worlds", "1", "--generations", "1", "--population", "2", "--holdout", "1", "--workers", "1"]
 TOY = ('[inputs.speed]\nrange = [0, 1]\nsets = { lo = [0, 0, 0.3, 0.6], hi = [0.4, 0.7, 1, 1] }\n'
@@ -37,10 +38,15 @@ def no_cluster(monkeypatch):
 
 def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys):
     out = tmp_path / "tune"
+    # The first generation through the command line, as a user starts it; its last lines are the verdict.
+    assert main(["tune", "default", "--scenarios", "moving", "--worlds", "1", "--generations", "1", "--population", "2",
+                 "--holdout", "1", "--seed", "7", "--workers", "2", "--out", str(out)]) == 0  # fmt: skip
+    first = json.loads((out / "result.json").read_text())
+    assert first["generations"] == 1 and (out / "checkpoint.pkl").exists()
+    printed = capsys.readouterr().err
+    assert f"verdict: {HEADLINES[first['verdict']]}" in printed and first["verdict_lines"][0] in printed
     options = TuneOptions(rulebase="default", scenarios=["moving"], out=out, worlds=1, generations=1, population=2, holdout=1,
                           seed=7, workers=2, command="rover-ctl tune default --scenarios moving ...")  # fmt: skip
-    first = tune(options)
-    assert first["generations"] == 1 and (out / "checkpoint.pkl").exists()
     # The same run, longer, resumed from its checkpoint on an existing cluster (--scheduler).
     options.generations, options.workers = 2, None
     with LocalCluster(n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
