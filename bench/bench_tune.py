@@ -111,8 +111,8 @@ def record_run(result_path: Path, note: str = "") -> dict[str, Any]:
             lines.append(f"| {row['scenario']} | {r['rulebase'] if label == 'source' else 'tuned'} | {s['episodes']} | {s['success_rate']:.0%} | "
                          f"{s['collisions']} | {s['timeouts']} | {time_s} | {path_m} | {s['score']:.1f} |")  # fmt: skip
     history = r["history"]
-    verdict = [f"Verdict (the run's own, rover_ctl/tuning/verdict.py): **{r['verdict']}**", ""] + [f"- {line}" for line in r["verdict_lines"]] \
-        if "verdict" in r else []  # runs before 2026-11-27 had none
+    verdict = ([f"Verdict (the run's own, rover_ctl/tuning/verdict.py): **{r['verdict']}**", ""] + [f"- {line}" for line in r["verdict_lines"]]
+               if "verdict" in r else [])  # runs before 2026-11-27 had none
     seeds = r["holdout_seeds"]
     shown = f"{seeds}" if len(seeds) <= 10 else f"{len(seeds)} per scenario, drawn from --seed ({', '.join(map(str, seeds[:5]))}, ...; all in the run's report)"
     markdown = "\n".join(verdict + [""] * bool(verdict) + lines) + (

@@ -16,9 +16,9 @@ One run, in ``TuneOptions.out``:
 4. at the end the tuned rule base, CMA-ES's final distribution mean (``es.mean``, repaired), and
    the source rule base are driven on held-out seeds the search never used, and
    ``rover_ctl.tuning.verdict`` says per scenario whether the tuned base is better, worse, or not
-   shown to differ (paired tests, not the raw rates); ``tuned.toml`` (loads with ``--rulebase FILE``), ``report.md`` (command, seeds,
-   verdict, before/after table, convergence), ``convergence.png`` and ``result.json`` are
-   written.
+   shown to differ (paired tests, not the raw rates); ``tuned.toml`` (loads with
+   ``--rulebase FILE``), ``report.md`` (command, seeds, verdict, before/after table,
+   convergence), ``convergence.png`` and ``result.json`` are written.
 
 Why the mean and not the best candidate seen: a candidate's training score is a mean over a few
 worlds, so the lowest of some 240 such scores is mostly the luckiest draw (the winner's curse).
@@ -453,7 +453,7 @@ def _result(o: TuneOptions, genome: Genome, state: dict[str, Any], training: lis
     verdicts = []
     for name in o.scenarios:
         source, tuned = [x for x in before if x.scenario == name], [x for x in after if x.scenario == name]
-        verdicts.append(judge.compare(name, source, tuned))
+        verdicts.append(judge.compare(name, source, tuned, scenarios=len(o.scenarios)))
         table.append({"scenario": name, "source": _summary(source), "tuned": _summary(tuned), "verdict": asdict(verdicts[-1])})
     return {
         "rulebase": o.rulebase, "scenarios": o.scenarios, "generations": len(state["history"]), "population": o.population,
@@ -493,7 +493,7 @@ def _write_outputs(o: TuneOptions, state: dict[str, Any], result: dict[str, Any]
         f"base on the same worlds: {state['source_score']:.2f})", "",
         "## Verdict on the held-out worlds", "",
         f"**{judge.HEADLINES[result['verdict']]}** (higher success, or equal success with a shorter time, on every scenario; "
-        f"paired one-sided tests at {result['alpha']:g}: exact McNemar on success, Wilcoxon signed-rank on the times of the worlds "
+        f"paired one-sided tests at {result['alpha']:g} (worse at {result['alpha']:g} / {len(o.scenarios)}): exact McNemar on success, Wilcoxon signed-rank on the times of the worlds "
         "both completed; rover_ctl/tuning/verdict.py)", "",
         *[f"- {line}" for line in result["verdict_lines"]], "",
         f"What {o.holdout} worlds cannot see: a rule base that fails up to about 3 / {o.holdout} = {min(1.0, 3 / o.holdout):.0%} "

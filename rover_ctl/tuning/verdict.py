@@ -11,17 +11,25 @@ would give:
   between the bases each such world is a fair coin, so ``p_better = P(X >= c)`` and
   ``p_worse = P(X >= b)`` for ``X ~ Binomial(b + c, 1/2)`` (one-sided);
 - **time**, the Wilcoxon signed-rank test on the mission times of the worlds both completed,
-  one-sided each way.
+  one-sided each way (scipy's normal approximation with its tie and zero corrections: mission
+  times fall on a grid, so ties are common, and the approximation gives the same p on every
+  scipy the project allows, where ``method="auto"`` changed between versions).
 
-A scenario's verdict (``alpha`` = ``VerdictParams.alpha``):
+A scenario's verdict, with ``alpha`` = ``VerdictParams.alpha`` and ``alpha_w = alpha / k`` for
+``k`` scenarios judged together:
 
 - ``better``: ``c > b`` with ``p_better < alpha``; or the success difference not significant
   either way, ``c >= b``, and the tuned base faster with ``p < alpha``;
-- ``worse``: the mirror image (``b > c`` with ``p_worse < alpha``; or success not significant,
-  ``b >= c``, and slower with ``p < alpha``);
+- ``worse``: the mirror image at ``alpha_w`` (``b > c`` with ``p_worse < alpha_w``; or success
+  not significant, ``b >= c``, and slower with ``p < alpha_w``);
 - ``not shown``: neither.
 
-The tuned base beats its source when every scenario is ``better``. What a sample cannot see is
+The tuned base beats its source when every scenario is ``better``: a claim about all ``k`` at
+once, which chance makes for two equal bases less often than ``alpha``. It is worse when any
+scenario is ``worse``: a claim about one of ``k``, which chance makes up to ``k`` times as
+often, hence the Bonferroni ``alpha / k`` (two equal bases, 100 worlds at 93 % success, 1,000
+simulated draws: worse somewhere in four scenarios 20 % of the time at ``alpha``, 6 % at
+``alpha / 4``). What a sample cannot see is
 said too: with no failure among ``n`` worlds, a failure rate up to about ``3 / n`` is still
 likely (the "rule of three", the 95 % upper bound), so ten held-out worlds cannot tell a base
 that strikes one world in twenty from one that never does. That is how a 10-world check once
@@ -50,7 +58,7 @@ HEADLINES = {
 class VerdictParams:
     alpha: float = 0.05
     """One-sided significance level of both tests: a difference counts when chance alone would
-    give one as large less often than this."""
+    give one as large less often than this (``worse`` at ``alpha`` over the number of scenarios)."""
 
 
 @dataclass(frozen=True)
@@ -88,15 +96,20 @@ def signed_rank_p(differences: Sequence[float]) -> tuple[float, float]:
         return 1.0, 1.0
     from scipy.stats import wilcoxon  # only `rover-ctl tune` gets here
 
-    less = float(wilcoxon(nonzero, alternative="less").pvalue)
-    greater = float(wilcoxon(nonzero, alternative="greater").pvalue)
+    less = float(wilcoxon(nonzero, alternative="less", method="approx").pvalue)
+    greater = float(wilcoxon(nonzero, alternative="greater", method="approx").pvalue)
     return less, greater
 
 
-def compare(scenario: str, source: Sequence[Outcome], tuned: Sequence[Outcome], params: VerdictParams = VerdictParams()) -> ScenarioVerdict:
-    """One scenario's verdict from its paired outcomes (the same worlds, matched by seed)."""
+def compare(scenario: str, source: Sequence[Outcome], tuned: Sequence[Outcome], params: VerdictParams = VerdictParams(),
+            scenarios: int = 1) -> ScenarioVerdict:  # fmt: skip
+    """One scenario's verdict from its paired outcomes (the same worlds, matched by seed), one of
+    ``scenarios`` judged together. ValueError unless both ran the same worlds, each once."""
     tuned_by_seed = {x.seed: x for x in tuned}
-    pairs = [(s, tuned_by_seed[s.seed]) for s in source if s.seed in tuned_by_seed]
+    source_seeds = [x.seed for x in source]
+    if len(tuned_by_seed) != len(tuned) or len(set(source_seeds)) != len(source) or set(source_seeds) != set(tuned_by_seed):
+        raise ValueError(f"{scenario}: the source and tuned outcomes are not the same worlds, each once")
+    pairs = [(s, tuned_by_seed[s.seed]) for s in source]
     b = sum(s.success and not t.success for s, t in pairs)
     c = sum(t.success and not s.success for s, t in pairs)
     p_better, p_worse = binomial_tail(c, b + c), binomial_tail(b, b + c)
@@ -104,11 +117,11 @@ def compare(scenario: str, source: Sequence[Outcome], tuned: Sequence[Outcome], 
     changes = [t.duration_s - s.duration_s for s, t in both]
     p_shorter, p_longer = signed_rank_p(changes)
     median = statistics.median(changes) if changes else math.nan
-    alpha = params.alpha
+    alpha, alpha_w = params.alpha, params.alpha / max(scenarios, 1)
     success_even = p_better >= alpha and p_worse >= alpha
     if (c > b and p_better < alpha) or (success_even and c >= b and p_shorter < alpha):
         verdict = BETTER
-    elif (b > c and p_worse < alpha) or (success_even and b >= c and p_longer < alpha):
+    elif (b > c and p_worse < alpha_w) or (success_even and b >= c and p_longer < alpha_w):
         verdict = WORSE
     else:
         verdict = NOT_SHOWN
@@ -120,7 +133,7 @@ def compare(scenario: str, source: Sequence[Outcome], tuned: Sequence[Outcome], 
 
 def overall(verdicts: Iterable[ScenarioVerdict]) -> str:
     """``better`` when the tuned base is better on every scenario, ``worse`` when it is worse on
-    any, else ``not shown``."""
+    any (each judged by ``compare`` with ``scenarios`` = how many), else ``not shown``."""
     kinds = [v.verdict for v in verdicts]
     if kinds and all(k == BETTER for k in kinds):
         return BETTER

@@ -74,7 +74,7 @@ def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys)
     assert main(["fuzzy", "show", str(tuned)]) == 0  # --rulebase FILE takes it as it takes a shipped name
     report = (out / "report.md").read_text()
     assert "rover-ctl tune default" in report and str(result["holdout_seeds"][0]) in report
-    assert result["verdict"] in ("better", "worse", "not shown") and "## Verdict on the held-out worlds" in report
+    assert result["verdict"] == "not shown" and "## Verdict on the held-out worlds" in report  # one world shows nothing
     assert result["verdict_lines"][0].startswith("moving: ") and result["verdict_lines"][0] in report
     assert (out / "convergence.png").stat().st_size > 1000
     assert json.loads((out / "result.json").read_text())["generations"] == 2

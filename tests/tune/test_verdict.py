@@ -73,9 +73,34 @@ def test_overall_needs_every_scenario():
 
 
 def test_pairs_follow_the_seeds_not_the_order():
-    source = runs([True, False, True])
-    v = compare("moving", source, list(reversed(source)))
-    assert v.verdict == NOT_SHOWN and (v.source_only, v.tuned_only) == (0, 0)
+    source = runs([True, True, False], [50.0, 60.0, 70.0])
+    v = compare("moving", source, list(reversed(source)))  # paired by position: one lost each way
+    assert (v.source_only, v.tuned_only) == (0, 0) and v.median_time_change_s == 0.0
+
+
+@pytest.mark.parametrize("tuned_seeds", [[1, 2], [1, 2, 4], [1, 2, 2]])
+def test_outcomes_of_other_worlds_are_refused(tuned_seeds):
+    source = runs([True, True, True])
+    tuned = [outcome(seed, True) for seed in tuned_seeds]
+    with pytest.raises(ValueError, match="not the same worlds"):
+        compare("moving", source, tuned)
+
+
+def test_longer_times_at_equal_success_are_worse():
+    source = runs([True] * 20, [60.0 + k for k in range(20)])
+    tuned = runs([True] * 20, [66.0 + k for k in range(20)])
+    v = compare("moving", source, tuned)
+    assert v.verdict == WORSE and v.median_time_change_s == 6.0
+
+
+def test_worse_in_one_of_several_scenarios_needs_more_evidence():
+    """Bonferroni: seven worlds lost and none won (p 1/128 = 0.0078) is worse alone, and in one
+    of four scenarios (0.0078 < 0.05 / 4); five lost (p 0.031) is worse alone, not in one of two."""
+    seven = compare("moving", runs([True] * 20), runs([True] * 13 + [False] * 7), scenarios=4)
+    five = [compare("moving", runs([True] * 20), runs([True] * 15 + [False] * 5), scenarios=k) for k in (1, 2)]
+    assert seven.verdict == WORSE and [v.verdict for v in five] == [WORSE, NOT_SHOWN]
+    better = compare("a", runs([False] * 8), runs([True] * 8))
+    assert overall([better, seven]) == WORSE
 
 
 @pytest.mark.parametrize("n", [0, 1, 5, 16, 40])
@@ -92,5 +117,5 @@ pair = st.tuples(st.booleans(), st.floats(30.0, 90.0), st.booleans(), st.floats(
 def test_swapping_the_bases_swaps_the_verdict(pairs):
     source = [outcome(k, a, da) for k, (a, da, _, _) in enumerate(pairs)]
     tuned = [outcome(k, b, db) for k, (_, _, b, db) in enumerate(pairs)]
-    forward, backward = compare("x", source, tuned).verdict, compare("x", tuned, source).verdict
+    forward, backward = compare("x", source, tuned).verdict, compare("x", tuned, source).verdict  # one scenario: symmetric
     assert {forward, backward} in ({NOT_SHOWN}, {BETTER, WORSE})
