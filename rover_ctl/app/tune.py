@@ -413,9 +413,7 @@ def tune(o: TuneOptions, on_progress: Callable[[Progress], None] | None = None, 
     finally:
         cluster.close()
     half = len(outcomes) // 2
-    result = _result(o, genome, state, training, holdout, outcomes[:half], outcomes[half:], holdout_wall)
-    result["tuned"] = {"what": f"CMA-ES distribution mean after {len(state['history'])} generations",
-                       "x": [float(v) for v in genome.repaired(np.asarray(es.mean))]}  # fmt: skip
+    result = _result(o, genome, state, training, holdout, outcomes[:half], outcomes[half:], holdout_wall, genome.repaired(np.asarray(es.mean)))
     _write_outputs(o, state, result, where, tuned_doc)
     return result
 
@@ -448,7 +446,7 @@ def _summary(outcomes: list[Outcome]) -> dict[str, Any]:
 
 
 def _result(o: TuneOptions, genome: Genome, state: dict[str, Any], training: list[int], holdout: list[int],
-            before: list[Outcome], after: list[Outcome], holdout_wall_s: float) -> dict[str, Any]:  # fmt: skip
+            before: list[Outcome], after: list[Outcome], holdout_wall_s: float, tuned_x: np.ndarray) -> dict[str, Any]:  # fmt: skip
     table = []
     verdicts = []
     for name in o.scenarios:
@@ -461,6 +459,7 @@ def _result(o: TuneOptions, genome: Genome, state: dict[str, Any], training: lis
         "weights": asdict(Weights()), "source_score": state["source_score"], "best": {k: v for k, v in state["best"].items() if k != "document"},
         "history": state["history"], "episodes": state["episodes"], "search_wall_s": round(state["wall_s"], 1),
         "search_sim_s": round(state["sim_s"], 1), "holdout_wall_s": round(holdout_wall_s, 1), "holdout": table,
+        "tuned": {"what": f"CMA-ES distribution mean after {len(state['history'])} generations", "x": [float(v) for v in tuned_x]},
         "verdict": judge.overall(verdicts), "verdict_lines": [judge.sentence(v) for v in verdicts], "alpha": judge.VerdictParams().alpha,
         "holdout_runs": {"source": [x.to_dict() for x in before], "tuned": [x.to_dict() for x in after]},
         "command": o.command, "config_overrides": o.config_overrides,

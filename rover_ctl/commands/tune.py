@@ -87,10 +87,6 @@ def run(args: argparse.Namespace) -> int:
                 console.line()
     except TuneError as exc:
         raise UserError(str(exc)) from None
-    for row in result["holdout"]:
-        s, t = row["source"], row["tuned"]
-        console.print(f"{row['scenario']}: held-out success {s['success_rate']:.0%} -> {t['success_rate']:.0%}, "
-                      f"score {s['score']:.1f} -> {t['score']:.1f}")  # fmt: skip
     for line in result["verdict_lines"]:
         console.print(line, markup=False, highlight=False, soft_wrap=True)
     console.print(f"verdict: {HEADLINES[result['verdict']]}", markup=False, highlight=False, soft_wrap=True)

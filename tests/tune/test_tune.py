@@ -39,13 +39,13 @@ def no_cluster(monkeypatch):
 def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys):
     out = tmp_path / "tune"
     # The first generation through the command line, as a user starts it; its last lines are the verdict.
-    assert main(["tune", "default", "--scenarios", "moving", "--worlds", "1", "--generations", "1", "--population", "2",
+    assert main(["tune", "default", "--scenarios", "moving", "--worlds", "1", "--generations", "1", "--population", "4",
                  "--holdout", "1", "--seed", "7", "--workers", "2", "--out", str(out)]) == 0  # fmt: skip
     first = json.loads((out / "result.json").read_text())
     assert first["generations"] == 1 and (out / "checkpoint.pkl").exists()
     printed = capsys.readouterr().err
     assert f"verdict: {HEADLINES[first['verdict']]}" in printed and first["verdict_lines"][0] in printed
-    options = TuneOptions(rulebase="default", scenarios=["moving"], out=out, worlds=1, generations=1, population=2, holdout=1,
+    options = TuneOptions(rulebase="default", scenarios=["moving"], out=out, worlds=1, generations=1, population=4, holdout=1,
                           seed=7, workers=2, command="rover-ctl tune default --scenarios moving ...")  # fmt: skip
     # The same run, longer, resumed from its checkpoint on an existing cluster (--scheduler).
     options.generations, options.workers = 2, None
@@ -56,7 +56,7 @@ def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys)
     assert result["history"][1]["workers"] == 1
     assert [h["generation"] for h in result["history"]] == [1, 2]
     assert result["history"][0] == first["history"][0]
-    assert result["episodes"] == 2 * 2 * 1 + 1  # two candidates a generation, and the source in generation 1
+    assert result["episodes"] == 2 * 4 * 1 + 1  # four candidates a generation (two parents: a mean no candidate is), and the source in generation 1
     assert not set(result["training_seeds"]) & set(result["holdout_seeds"])
     assert result["best"]["score"] <= min(h["best"] for h in result["history"])
     for row in result["holdout"]:
@@ -70,6 +70,9 @@ def test_a_two_generation_tune_resumes_and_its_rule_base_loads(tmp_path, capsys)
     genome = Genome(*load_document("default"))
     assert result["tuned"]["x"] == [float(v) for v in genome.repaired(np.asarray(es.mean))]
     assert load_rulebase(tuned).inputs == parse_rulebase(genome.decode_document(np.asarray(es.mean)), "mean").inputs
+    with open(out / "checkpoint.pkl", "rb") as f:
+        best_document = pickle.load(f)["best"]["document"]
+    assert load_rulebase(tuned).inputs != parse_rulebase(best_document, "best").inputs  # the check above tells them apart
     assert [v.name for v in rulebase.inputs] == [v.name for v in load_rulebase("default").inputs]
     assert main(["fuzzy", "show", str(tuned)]) == 0  # --rulebase FILE takes it as it takes a shipped name
     report = (out / "report.md").read_text()
