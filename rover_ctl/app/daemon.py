@@ -66,7 +66,7 @@ EXIT_CONFIG = 78
 
 CSV_COLUMNS = LOG_COLUMNS
 SENSORS_PRESENT = (mav.MAV_SYS_STATUS_SENSOR_GPS | mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
-                   | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)  # fmt: skip
+                   | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mav.MAV_SYS_STATUS_PREARM_CHECK)  # fmt: skip
 """SYS_STATUS sensors the daemon reports on the GCS link (through the vehicle)."""
 SENSOR_FAILSAFES = {"GPS lost": mav.MAV_SYS_STATUS_SENSOR_GPS, "fence breach": mav.MAV_SYS_STATUS_GEOFENCE,
                     "vehicle link": mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS}  # fmt: skip
@@ -614,6 +614,7 @@ class Daemon:
             present = SENSORS_PRESENT | (mav.MAV_SYS_STATUS_GEOFENCE if self.autopilot.mission.fence else 0)
             reasons = self.autopilot.state().failsafes
             failed = sum(bit for reason, bit in SENSOR_FAILSAFES.items() if reason in reasons)
+            failed |= 0 if self.autopilot.ready_to_arm() else mav.MAV_SYS_STATUS_PREARM_CHECK
             health = self.link.health
             self.gcs.send_sys_status(now, self.battery.voltage_v, self.battery.remaining_pct, present=present, failed=failed,
                                      drop_rate_cpct=round(100 * health.loss_pct), errors_comm=health.crc_errors)  # fmt: skip

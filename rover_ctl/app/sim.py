@@ -195,6 +195,8 @@ class Progress:
     armed: bool = False
     system_status: int = 0
     """MAV_STATE of the daemon's heartbeat (CRITICAL while a failsafe holds)."""
+    ready_to_arm: bool | None = None
+    """SYS_STATUS's pre-arm health bit (MAV_SYS_STATUS_PREARM_CHECK); None until reported."""
     last_text: str = ""
     texts: list[str] = field(default_factory=list)
     """Every STATUSTEXT from the daemon, in order."""
@@ -545,6 +547,8 @@ class SimRun:
                     p.distance_left_m = math.dist(p.position_en, (te, tn))
         elif kind == "ATTITUDE":
             p.sim_time_s = max(p.sim_time_s, msg.time_boot_ms / 1000.0)
+        elif kind == "SYS_STATUS" and msg.onboard_control_sensors_present & mav.MAV_SYS_STATUS_PREARM_CHECK:
+            p.ready_to_arm = bool(msg.onboard_control_sensors_health & mav.MAV_SYS_STATUS_PREARM_CHECK)
         elif kind == "MISSION_CURRENT":
             p.current_seq = msg.seq
             p.items_total = msg.total

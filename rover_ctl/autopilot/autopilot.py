@@ -287,6 +287,14 @@ class Autopilot:
         self._outbox.append(ArmRequest(arm, force))
         return ACCEPTED
 
+    def ready_to_arm(self) -> bool:
+        """Whether an arming request now would pass the daemon's own checks (armed: True), the
+        ground station's "ready" light (SYS_STATUS's MAV_SYS_STATUS_PREARM_CHECK, as ArduPilot
+        reports it). The vehicle's own checks come on top, when it is asked."""
+        if self.armed:
+            return True
+        return self.sensor_error is None and self.rangefinder_plan is not None and not prearm.failures(self._arming_inputs())
+
     def set_mode(self, custom_mode: int, reason: str = "gcs") -> Reply:
         why = modes.unsupported(custom_mode)
         if why:

@@ -78,6 +78,28 @@ def test_arming_needs_the_rangefinders_the_rule_base_reads():
     assert bench.texts[-1] == "PreArm: rangefinder missing: left"
 
 
+def test_ready_to_arm_says_what_an_arming_request_would_meet_and_says_nothing():
+    """SYS_STATUS's pre-arm bit: the daemon's checks as arm() makes them, without their texts."""
+    bench = Bench()
+    assert not bench.autopilot.ready_to_arm()  # no position yet
+    bench.home(Mission(items=[waypoint(0.0, 2000.0)]))
+    bench.step()
+    assert not bench.autopilot.ready_to_arm()  # first waypoint 2000 m from home
+    bench.home(Mission(items=[waypoint(0.0, 20.0)]))
+    bench.step()
+    assert bench.autopilot.ready_to_arm() and not bench.texts
+    bench.gps_ok = False
+    bench.step()
+    assert not bench.autopilot.ready_to_arm()  # no recent GPS fix
+    bench.gps_ok = True
+    bench.step()
+    assert bench.request(bench.autopilot.arm(True)).accepted
+    bench.autopilot.on_vehicle(True)
+    bench.gps_ok = False
+    bench.step()
+    assert bench.autopilot.ready_to_arm()  # armed: ready, as ArduPilot reports it
+
+
 def test_arming_waits_for_a_fresh_gps_fix():
     bench = Bench()
     bench.home()

@@ -230,14 +230,16 @@ def test_an_accepted_arming_is_taken_in_stream_order_with_the_heartbeats_read_wi
 def test_the_daemon_refuses_arming_without_a_recent_fix(tmp_path):
     """The daemon's own pre-arm check: after a GPS dropout its estimator still has a position
     (dead reckoning), but arming now would start the mission blind; refused with its reason,
-    without asking the vehicle."""
+    without asking the vehicle. Its SYS_STATUS pre-arm bit (a ground station's "ready" light)
+    says so before anyone tries."""
     from rover_ctl.vocabulary import mav
 
     with SimRun(SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0)) as run:
         assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
-        assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # the rangefinders known
+        # SYS_STATUS comes at its wall-clock rate (1 Hz), many sim seconds apart in lockstep
+        assert run.wait_for(lambda p: p.ready_to_arm, wall_timeout_s=5.0)  # the rangefinders known, the fix recent
         run.sitl_param("SIM_GPS_DISABLE", 1)
-        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False  # past gps_timeout_s (1 s)
+        assert run.wait_for(lambda p: p.ready_to_arm is False, wall_timeout_s=5.0)  # past gps_timeout_s (1 s)
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_FAILED
         assert run.wait_for(lambda p: "PreArm: no recent GPS fix" in p.texts, wall_timeout_s=5.0)
         assert not any(t.startswith("Vehicle refused arming") for t in run.progress.texts)
