@@ -20,6 +20,8 @@ between that and the target, so a rate on the edge does not flap.
 
 from __future__ import annotations
 
+import math
+
 from collections import deque
 from dataclasses import dataclass
 from typing import Callable
@@ -32,8 +34,13 @@ RATE_EVERY = 5
 
 
 class ControlTicks:
-    """The control step's schedule in vehicle time: a tick every ``period_s()``; ticks missed in a
-    gap of the vehicle's data are not replayed (the next one is a period after the gap)."""
+    """The control step's schedule in vehicle time: a tick at every whole multiple of
+    ``period_s()``; ticks missed in a gap of the vehicle's data are not replayed (the next one is
+    the next multiple after the gap).
+
+    Whole multiples, not a period after the first message: which message the daemon happens to
+    see first depends on the wall clock (it connects while the emulator runs), and a lockstep run
+    whose steps fell on odd 20 ms frames ran differently from one whose steps fell on even ones."""
 
     def __init__(self, period_s: Callable[[], float]) -> None:
         self._period_s = period_s
@@ -41,14 +48,14 @@ class ControlTicks:
 
     def due(self, t_s: float) -> bool:
         """Whether a step is due at vehicle time ``t_s``; if so the next tick is scheduled."""
+        period_s = self._period_s()
         if self.next_s is None:
-            self.next_s = t_s
+            self.next_s = math.ceil(t_s / period_s - 1e-9) * period_s
         if t_s + 1e-9 < self.next_s:
             return False
-        period_s = self._period_s()
         self.next_s += period_s
-        if self.next_s <= t_s:
-            self.next_s = t_s + period_s
+        if self.next_s <= t_s + 1e-9:  # a gap: the next multiple after it
+            self.next_s = (math.floor(t_s / period_s + 1e-9) + 1) * period_s
         return True
 
 

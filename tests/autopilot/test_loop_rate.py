@@ -123,3 +123,12 @@ def test_control_ticks_every_period_and_no_replay_after_a_gap():
     assert due == [0.0, 0.04, 0.08, 0.12, 0.16]
     assert ticks.due(1.0)  # after a 0.8 s gap: one step, not the twenty missed
     assert not ticks.due(1.03) and ticks.due(1.04)
+    assert ticks.due(1.5) and not ticks.due(1.51) and ticks.due(1.52)  # after a gap, back on the multiples of the period
+
+
+def test_control_ticks_fall_on_multiples_of_the_period_whenever_they_start():
+    """Which 20 ms frame the daemon sees first depends on the wall clock; its steps must not."""
+    for first_s in (0.0, 0.02, 0.06, 7.98):
+        ticks = ControlTicks(lambda: 0.04)
+        due = [t for t in (round(first_s + k * 0.02, 2) for k in range(6)) if ticks.due(t)]
+        assert all(abs(t / 0.04 - round(t / 0.04)) < 1e-6 for t in due) and len(due) == 3, (first_s, due)
