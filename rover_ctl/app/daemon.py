@@ -338,13 +338,14 @@ class Daemon:
             self.lockstep = True
             self._marker_wall_s = time.monotonic()
             self._maybe_step(marker.time_s)
-            link.answer_marker(marker)
         elif not self.lockstep and items:
             self._maybe_step(link.vehicle_time_s)
         self._check_silence()
         if self.autopilot.rangefinder_plan is not None and self._rangefinder_count() != self._planned_rangefinders:
             self._request_streams()  # the rover's rangefinders are known now: budget them
         self._check_streams()
+        if marker is not None:  # after everything this frame sends the vehicle: it applies them at this frame
+            link.answer_marker(marker)
         self._report_link()
         self.gcs.poll(time.monotonic(), readable=self._gcs_readable)
         self.table.flush()  # parameters set from a ground station: written at most every gcs.param_save_s

@@ -25,7 +25,11 @@ probe, and that is all it is. Only a vehicle that announced lockstep (AUTOPILOT_
 ``flight_custom_version == b"lockstep"``, which rover-sitl --lockstep sends) has its requests
 taken as end-of-frame markers, and only those from the system and component that announced it:
 they become ``FrameMarker`` items, answered by the daemon after its control step for that frame
-(docs/architecture.md, "Lockstep handshake"). The answer is the same message either way.
+(docs/architecture.md, "Lockstep handshake"). The answer is the same message either way. Until
+the vehicle's AUTOPILOT_VERSION is known (at most ``VERSION_WAIT_S``), its requests wait
+unanswered: answered as plain time sync, a lockstep emulator's first markers would let it run on
+while the daemon, not yet stepping frame by frame, read its frames in whatever batches the wall
+clock made; a lockstep run then went differently from run to run.
 
 SIMSTATE (the emulator's ground truth) is decoded into ``Truth`` for evaluation only; the daemon
 never navigates on it. Times in decoded items are vehicle time; the wall clock is used only for
@@ -72,6 +76,12 @@ LOCKSTEP_ANNOUNCEMENT = b"lockstep"
 markers (rover-sitl --lockstep; ArduPilot puts the first 8 bytes of its git hash there)."""
 READ_SIZE_BYTES = 65536
 """Largest read from the connection at once (a UDP datagram is at most this)."""
+VERSION_WAIT_S = 2.0
+"""Wall seconds from the vehicle's first TIMESYNC request during which the daemon does not answer
+such requests on a socket link, until the vehicle's AUTOPILOT_VERSION says whether they are
+lockstep markers: a lockstep emulator then waits for the daemon from its first frame on, every
+frame a step (time sync, below). A vehicle that never answers is answered after this; ArduPilot's
+latency probe, one in 10 s, is answered a moment late once."""
 MAX_READS_PER_POLL = 16
 """Reads of the connection in one ``poll`` (each up to READ_SIZE_BYTES)."""
 WRONG_BAUD_BYTES = 4096
@@ -312,6 +322,16 @@ class VehicleLink:
         """(system, component) that announced lockstep; its TIMESYNC requests are frame markers."""
         self.probes_answered = 0
         """TIMESYNC requests answered as plain time sync (ArduPilot's latency probe)."""
+        self._unanswered: tuple[int, int, int] | None = None
+        """(system, component, ts1) of the vehicle's latest TIMESYNC request held until its version is known."""
+        self._version_wait_end_s: float | None = None
+        """Wall time until which requests are held (set by the first one; ``VERSION_WAIT_S``)."""
+        self._serial = budget.is_serial(url)
+        """A serial line carries requests and answers only as the vehicle's time goes on (an
+        emulator's line in lockstep): its TIMESYNC requests are answered at once, and markers
+        during blocking calls too (``_pump``)."""
+        self._released: FrameMarker | None = None
+        """The held request, a lockstep marker after all: handed over right after the version."""
         self.readings_dropped = 0
         """Stale sensor readings skipped because newer ones of the same kind came in the same batch."""
         self._texts = StatusTextAssembler()
@@ -371,6 +391,9 @@ class VehicleLink:
             item = self._decode(msg)
             if item is not None:
                 items.append(item)
+                if self._released is not None:  # the version came: the marker held until now
+                    item, self._released = self._released, None
+                    items.append(item)
                 if stop_at_marker and isinstance(item, FrameMarker):
                     break
         if self.lockstep_source is None and len(items) > 1:
@@ -478,6 +501,12 @@ class VehicleLink:
                 # they advance time but are not a sign of life of the vehicle.
                 self._advance(msg.ts1 / 1e9, alive=False)
                 return FrameMarker(time_s=msg.ts1 / 1e9, ts1_ns=msg.ts1)
+            if self.version is None and not self._serial and (self.vehicle is None or source == (self.target_system, self.target_component)):
+                if self._version_wait_end_s is None:
+                    self._version_wait_end_s = self._wall() + VERSION_WAIT_S
+                if self._wall() < self._version_wait_end_s:  # a lockstep marker, perhaps: wait for the version
+                    self._unanswered = (*source, msg.ts1)
+                    return None
             self._answer_timesync(msg.ts1)
             self.probes_answered += 1
             return None
@@ -542,6 +571,13 @@ class VehicleLink:
         lockstep = custom == LOCKSTEP_ANNOUNCEMENT
         self.lockstep_source = (msg.get_srcSystem(), msg.get_srcComponent()) if lockstep else None
         self.version = VehicleVersion(msg.flight_sw_version, custom, lockstep)
+        held, self._unanswered = self._unanswered, None
+        if held is not None:
+            if held[:2] == self.lockstep_source:  # the frame it waits on: stepped, then answered
+                self._released = FrameMarker(time_s=held[2] / 1e9, ts1_ns=held[2])
+            else:
+                self._answer_timesync(held[2])
+                self.probes_answered += 1
         return self.version
 
     def _boot_time_s(self, time_usec: int) -> float:
@@ -563,6 +599,10 @@ class VehicleLink:
     def tick(self) -> None:
         """Housekeeping, call every loop turn: our heartbeat and command retries (wall clock)."""
         now = self._wall()
+        if self._unanswered is not None and now >= self._version_wait_end_s:  # no version came: plain time sync
+            self._answer_timesync(self._unanswered[2])
+            self.probes_answered += 1
+            self._unanswered = None
         if now >= self._next_heartbeat_s:
             self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE)
             self._next_heartbeat_s = now + self.params.heartbeat_period_s
@@ -696,9 +736,8 @@ class VehicleLink:
     # ---- blocking helpers for start-up ---------------------------------------------------------
 
     def wait_vehicle(self, timeout_s: float, cancelled: Callable[[], bool] = lambda: False) -> VehicleStatus | None:
-        """Heartbeat until the vehicle's heartbeat arrives (None if ``cancelled()`` first); lockstep
-        markers are answered meanwhile (nothing is being commanded yet). Decoded items are kept
-        for the next ``poll``."""
+        """Heartbeat until the vehicle's heartbeat arrives (None if ``cancelled()`` first). Decoded
+        items are kept for the next ``poll`` (``_pump``)."""
         deadline = self._wall() + timeout_s
         while self.vehicle is None:
             if cancelled():
@@ -732,10 +771,14 @@ class VehicleLink:
         return results[0]
 
     def _pump(self, wait_s: float) -> None:
+        """Read while a blocking call waits; everything read is kept for the next ``poll``. On a
+        socket, lockstep markers too: the emulator waits at its frame until the control loop has
+        stepped it, and answers commands meanwhile. On a serial line they are answered: the line
+        carries the command and its answer only as the vehicle's time goes on."""
         self.tick()
         self.wait_readable(wait_s)
         for item in self.poll(stop_at_marker=False):
-            if isinstance(item, FrameMarker):
+            if self._serial and isinstance(item, FrameMarker):
                 self.answer_marker(item)
             else:
                 self._held.append(item)
