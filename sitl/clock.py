@@ -14,6 +14,10 @@ MARKER_RESEND_S = 0.2
 """An unanswered lockstep marker is sent again after this many wall seconds (UDP may drop it, a
 byte error on a serial line may hide it): well under the daemon's vehicle-link timeout (0.4 s of
 silence), so a lost marker is not taken for a silent vehicle."""
+HOLD_TIMEOUT_S = 10.0
+"""``--hold-at-s``: wall seconds the clock waits at the hold for the vehicle to be armed before it
+goes on anyway (the controller's pre-arm checks may refuse the arming there: it is then retried
+in running time, as without a hold)."""
 MIN_SPEEDUP = 0.01
 """100 wall seconds per sim second; slower is a stalled emulator (1e-300 overflowed select's timeout)."""
 

@@ -16,9 +16,10 @@ import random
 import select
 import signal
 import sys
+import time
 from pathlib import Path
 
-from sitl.clock import MIN_SPEEDUP, FrameClock, LockstepMarker, Pacer
+from sitl.clock import HOLD_TIMEOUT_S, MARKER_RESEND_S, MIN_SPEEDUP, FrameClock, LockstepMarker, Pacer
 from sitl.endpoints import Endpoint, EndpointBusy, EndpointError, PtyEndpoint, mavlink, open_endpoint
 from sitl.faults import FAULT_PARAMS, FaultError, check_param
 from sitl.line import DEFAULT_BUFFER_BYTES, SerialLine
@@ -138,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     timing.add_argument("--speedup", type=_number(float, MIN_SPEEDUP, math.inf, f"a number >= {MIN_SPEEDUP:g}"), default=1.0, metavar="N",
                         help=f"run at N x real time, N >= {MIN_SPEEDUP:g} ('inf': as fast as possible)")
     timing.add_argument("--lockstep", action="store_true", help="advance a frame only when the controller answers its TIMESYNC marker")
+    parser.add_argument("--hold-at-s", type=_number(float, 0.0, FINITE_MAX, "a finite number >= 0"), metavar="S",
+                        help=f"with --lockstep: stop the clock at sim time S until the vehicle is armed (at most {HOLD_TIMEOUT_S:g} wall s), "
+                             "so that a ground station arms it at the same frame in every run")
     parser.add_argument("--frame-s", type=_number(float, *FRAME_S_RANGE, "a number from {:g} to {:g}".format(*FRAME_S_RANGE)), default=DEFAULT_FRAME_S, metavar="S",
                         help="frame length in sim seconds, {:g} to {:g} (default {:g})".format(*FRAME_S_RANGE, DEFAULT_FRAME_S))
     parser.add_argument("--truth-log", type=Path, metavar="FILE", help="write ground truth as JSON lines")
@@ -164,8 +168,12 @@ class Emulator:
     """The running process: rover + vehicle state + endpoints + clock."""
 
     def __init__(self, rover: SimRover, vehicle: MavlinkVehicle, endpoints: list[Endpoint], clock: FrameClock,
-                 lockstep: bool, speedup: float, truth: TruthLog | None, seed: int) -> None:
+                 lockstep: bool, speedup: float, truth: TruthLog | None, seed: int, hold_at_s: float | None = None) -> None:
         self.rover, self.vehicle, self.endpoints, self.clock = rover, vehicle, endpoints, clock
+        self.hold_at_s = hold_at_s
+        """Lockstep: the sim time at which the clock stops until the vehicle is armed (``hold``)."""
+        self.clock_started = False
+        """The first frame went out (in lockstep only once the controller is there)."""
         self.controller = endpoints[0]
         self.lockstep = lockstep
         vehicle.lockstep = lockstep
@@ -241,10 +249,23 @@ class Emulator:
                 continue
             peers_before = len(endpoint.peers)
             answered = self.receive(endpoint, endpoint.poll(fd)) or answered
-            if self.lockstep and endpoint is self.controller and len(endpoint.peers) > peers_before:
+            if self.lockstep and self.clock_started and endpoint is self.controller and len(endpoint.peers) > peers_before:
                 self.send_marker()  # a controller that just connected gets the marker at once
         self.flush()
         return answered
+
+    def hold(self) -> None:
+        """``--hold-at-s``: the frame is done and answered; time stands still until the vehicle is
+        armed, or ``HOLD_TIMEOUT_S`` wall seconds. Messages are applied at this frame's time as
+        they come (a ground station's MISSION_START and arming, through the controller), so the
+        arming and everything after it happen at the same frame in every run, however long the
+        ground station took. The marker is repeated as for an unanswered one: the controller
+        answers without stepping again, and hears from the vehicle."""
+        deadline = time.monotonic() + HOLD_TIMEOUT_S
+        while not self.stop and not self.vehicle.armed and time.monotonic() < deadline:
+            self.serve(min(self.marker.resend_in_s(), deadline - time.monotonic()))
+            if self.marker.resend_in_s() <= 0:
+                self.send_marker()
 
     def receive(self, endpoint: Endpoint, received) -> bool:
         """Apply the (message, peer) pairs of ``endpoint`` at the frame's time; True if one of
@@ -264,6 +285,10 @@ class Emulator:
 
     # ---- main loop -------------------------------------------------------------------------
     def run(self, duration_s: float | None) -> None:
+        if self.lockstep:  # the first frame waits for the controller: from its first message on, it sees every frame
+            while not self.stop and not self.controller.peers:
+                self.serve(MARKER_RESEND_S)
+        self.clock_started = True
         while not self.stop:
             t_s = self.clock.t_s
             for endpoint in self.endpoints:  # what a serial line delivered by t_k
@@ -288,6 +313,9 @@ class Emulator:
                         self.markers_repeated += 1
                         repeats += 1
                         self.send_marker(repeat=repeats > 1)  # a second repeat: the first was not read either
+                if self.hold_at_s is not None and t_s >= self.hold_at_s - 1e-9:
+                    self.hold_at_s = None
+                    self.hold()
             else:
                 self.flush()
                 next_s = t_s + self.clock.frame_s
@@ -334,6 +362,11 @@ def _join_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+def _check_timing_flags(args) -> None:
+    if args.hold_at_s is not None and not args.lockstep:
+        raise UsageError("--hold-at-s needs --lockstep (only a lockstep clock can wait for the ground station)")
+
+
 def _check_line_flags(args) -> None:
     if args.baud is not None and not args.pty:
         raise UsageError("--baud: only the --pty endpoint has a serial line; add --pty")
@@ -375,6 +408,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
         _check_line_flags(args)
+        _check_timing_flags(args)
         world = _world(args)
     except (UsageError, WorldError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -424,7 +458,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_UNAVAILABLE if isinstance(exc, EndpointBusy) else 2
 
-    emulator = Emulator(rover, vehicle, endpoints, clock, args.lockstep, args.speedup, truth, args.seed)
+    emulator = Emulator(rover, vehicle, endpoints, clock, args.lockstep, args.speedup, truth, args.seed, args.hold_at_s)
     emulator.install_signals()
     for endpoint in endpoints:
         if isinstance(endpoint, PtyEndpoint):

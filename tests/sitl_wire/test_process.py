@@ -52,6 +52,8 @@ def main_error_line(capsys, *argv: str) -> str:
     (["--frame-s", "1e300"], "from 0.001 to 1"),
     (["--frame-s", "nan"], "from 0.001 to 1"),
     (["--speedup", "2", "--lockstep"], "not allowed with"),
+    (["--hold-at-s", "30"], "--hold-at-s needs --lockstep"),
+    (["--lockstep", "--hold-at-s", "-1"], "--hold-at-s: expected a finite number >= 0"),
     (["--endpoint", "serial:/dev/null"], "unknown scheme"),
     (["--endpoint", "tcpin:localhost"], "HOST:PORT"),
     (["--param", "SIM_NOPE=1"], "SIM_NOPE"),
@@ -138,7 +140,7 @@ def test_udp_controller_with_a_tcp_watcher_and_garbage(udp_port: int, tcp_port: 
             if msg is not None:
                 seen.append(msg)
         watcher.close()
-    assert len(of_type(received, "HEARTBEAT")) == 2
+    assert len(of_type(received, "HEARTBEAT")) == 3  # t = 0, 1, 2 s: the first frame waits for the controller, a UDP one too
     assert {"HEARTBEAT", "ATTITUDE", "GPS_RAW_INT"} <= {m.get_type() for m in seen}  # the watcher saw telemetry
     assert sitl.returncode == 0
     bad = int(sitl.output[-1].split(", ")[1].split()[0])
@@ -218,3 +220,21 @@ def test_the_vehicles_frames_number_without_gaps_between_the_lockstep_markers(ov
     assert len(seqs) > 400
     gaps = sum((b - a - 1) % 256 for a, b in zip(seqs, seqs[1:]))
     assert gaps == 0
+
+
+def test_the_clock_held_at_a_time_goes_on_when_the_vehicle_is_armed() -> None:
+    """``--hold-at-s``: after the frame at that time is answered, no frame comes (its marker is
+    repeated) until an arming command makes the vehicle armed; the next frame follows at once."""
+    from sitl.client import FORCE_ARM_MAGIC, LockstepError
+
+    with rover_sitl("--lockstep", "--hold-at-s", "0.5") as sitl:
+        client = lockstep_client(sitl.url, timeout_s=1.0)
+        client.run(0.5)
+        assert client.t_s == pytest.approx(0.5)
+        with pytest.raises(LockstepError):  # held: a second of wall time, no new frame
+            client.next_frame()
+        client.conn.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, FORCE_ARM_MAGIC, 0, 0, 0, 0, 0)
+        t_ns, msgs = client.next_frame()
+        assert t_ns / 1e9 == pytest.approx(0.52)
+        assert any(m.get_type() == "COMMAND_ACK" and m.result == mavutil.mavlink.MAV_RESULT_ACCEPTED for m in msgs)
+        client.close()
