@@ -80,6 +80,14 @@ STALL_TIMEOUT_S = 20.0
 """Wall seconds without any message from the daemon before the run is declared stuck."""
 ARM_RETRY_S = 0.2
 """Wall seconds between arming attempts the daemon refused."""
+POSITION_TIMEOUT_S = 30.0
+"""Wall seconds for the daemon's first position (GPS fix, pose), for the clock to reach
+``arm_at_s``, and for arming."""
+ARM_AT_S = 30.0
+"""``simulate`` in lockstep arms the rover at this sim time, the emulator's clock held there until
+it is armed (``rover-sitl --hold-at-s``): every run of a seed then arms at the same frame and
+runs the same (the daemon's pre-arm checks pass within about 6 s of boot; by 30 s the pose
+filter has settled)."""
 STOP_TIMEOUT_S = 10.0
 """Wall seconds a child gets to exit after SIGINT/SIGTERM before it is killed."""
 GCS_HEARTBEAT_PERIOD_S = 1.0
@@ -172,6 +180,10 @@ class SimOptions:
     None: a TCP (rover-sitl) or UDP (firmware) socket on loopback."""
     line_byte_error: float = 0.0
     """With ``line_baud``: the probability that a byte on the line arrives changed."""
+    arm_at_s: float | None = None
+    """Lockstep: ``run_mission`` arms at this sim time, the emulator's clock held there until the
+    rover is armed (``simulate`` sets ``ARM_AT_S``). None: as soon as it can, which in lockstep
+    is whenever the ground station's commands happen to land."""
 
 
 @dataclass
@@ -281,6 +293,8 @@ class SimRun:
         o = self.options
         cmd = ["--seed", str(o.seed), "--truth-log", str(self.out / "truth.jsonl")]
         cmd += ["--lockstep"] if o.lockstep else ["--speedup", f"{o.speedup:g}"]
+        if self._arm_at_s is not None:
+            cmd += ["--hold-at-s", repr(self._arm_at_s)]
         heading = self.world.home.heading_deg if self.world is not None and self.world.home is not None else 0.0
         if o.world is not None:
             cmd += ["--world", str(o.world)]
@@ -465,13 +479,25 @@ class SimRun:
                 return msg.result
         return -1
 
-    def arm(self, timeout_s: float = 30.0, force: bool = False) -> None:
+    @property
+    def _arm_at_s(self) -> float | None:
+        """``options.arm_at_s`` where the emulator can hold its clock for it: in lockstep, with the
+        vehicle link on a socket (a serial line carries bytes in sim time, and a held clock would
+        hold the arming command on the line too)."""
+        o = self.options
+        return o.arm_at_s if o.lockstep and not o.line_baud else None
+
+    def wait_for_position(self, timeout_s: float = POSITION_TIMEOUT_S) -> None:
+        """Until the daemon reports a position (AUTO and arming need one)."""
+        if not self.wait_for(lambda p: p.position_en is not None, wall_timeout_s=timeout_s):
+            raise SimError(f"no position from the daemon within {timeout_s:g} s: {self.progress.last_text}")
+
+    def arm(self, timeout_s: float = POSITION_TIMEOUT_S, force: bool = False) -> None:
         """Arm as soon as the daemon's and the vehicle's pre-arm checks pass (``force``: skip the
         daemon's); a refusal is retried. Its ACK is the vehicle's answer, on which the daemon drives,
         so nothing waits here for the GCS heartbeat's flag (1 Hz of wall time is many seconds of
         lockstep sim time)."""
-        if not self.wait_for(lambda p: p.position_en is not None, wall_timeout_s=timeout_s):
-            raise SimError(f"no position from the daemon within {timeout_s:g} s: {self.progress.last_text}")
+        self.wait_for_position(timeout_s)
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, ARM_FORCE_MAGIC if force else 0) == mav.MAV_RESULT_ACCEPTED:
@@ -518,6 +544,8 @@ class SimRun:
                 self._param_ack[msg.param_id] = float(msg.param_value)
             elif msg.get_type() == "ATTITUDE":  # the emulator's own clock, at its sensor rate
                 self.progress.sim_time_s = max(self.progress.sim_time_s, msg.time_boot_ms / 1000.0)
+            elif msg.get_type() == "TIMESYNC" and msg.tc1 == 0 and self.options.lockstep:  # a lockstep frame's end: its exact time
+                self.progress.sim_time_s = max(self.progress.sim_time_s, msg.ts1 / 1e9)
         self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())
         self._check_children()
 
@@ -583,9 +611,21 @@ class SimRun:
         return True
 
     def run_mission(self, on_tick: Callable[[Progress], None] | None = None) -> bool:
-        """Arm, MISSION_START, watch to the end. True if complete within the budget."""
-        self.arm()
-        self.start_mission()
+        """Arm, MISSION_START, watch to the end. True if complete within the budget.
+
+        With ``arm_at_s`` (lockstep): once the emulator's clock stands at it, MISSION_START and
+        then the arming, so that the daemon drives AUTO from the frame at which the vehicle arms,
+        in every run the same frame (docs/architecture.md, "Lockstep handshake")."""
+        arm_at_s = self._arm_at_s
+        if arm_at_s is None:
+            self.arm()
+            self.start_mission()
+        else:
+            self.wait_for_position()
+            if not self.wait_for(lambda p: p.sim_time_s >= arm_at_s - 1e-9, wall_timeout_s=POSITION_TIMEOUT_S):
+                raise SimError(f"the emulator's clock did not reach {arm_at_s:g} s within {POSITION_TIMEOUT_S:g} s")
+            self.start_mission()
+            self.arm()
         self.progress.started_sim_s = self.progress.sim_time_s
         return self.wait_for(lambda p: p.complete, sim_timeout_s=self.budget_s, on_tick=on_tick)
 
@@ -602,6 +642,8 @@ def simulate(options: SimOptions, on_tick: Callable[[Progress], None] | None = N
     """The whole ``rover-ctl sim``: run, stop, report. Returns the metrics."""
     from rover_ctl.app.report import write_report
 
+    if options.lockstep and options.arm_at_s is None:
+        options = replace(options, arm_at_s=ARM_AT_S)
     with SimRun(options) as run:
         complete = run.run_mission(on_tick)
     metrics = write_report(options.out, run.world_path, timed_out=not complete, plots=plots)

@@ -10,7 +10,7 @@ import pytest
 
 from bench.bench_navigation import ACCEPTANCE_RADIUS_M, write_inputs
 from rover_ctl.app.report import read_jsonl
-from rover_ctl.app.sim import SimOptions, simulate
+from rover_ctl.app.sim import ARM_AT_S, SimOptions, simulate
 from rover_ctl.estimation.frame import LocalFrame
 from rover_ctl.mission.files import save_mission
 from rover_ctl.mission.model import FRAME_GLOBAL_RELATIVE_ALT, Home, Mission, MissionItem
@@ -63,11 +63,9 @@ def test_a_pedestrian_crossing_the_path_is_let_through(tmp_path):
 @pytest.mark.parametrize("seed", [18, 34])
 def test_walkers_coming_head_on_are_stepped_aside_from(tmp_path, seed):
     """The navigation benchmark's head_on worlds 18 and 34 (one or two walkers coming down the leg
-    at the rover): with stepping aside off (``evasion.enabled=0``) the rover struck a walker in 3
-    of 3 runs of each; with it (the default) each passed 6 of 6 runs, three at a time on 2 cores
-    (2026-11-27): it steps aside, without contact. World 25, used before, is a near miss that
-    struck in 1 of 10 runs two at a time and 3 of 9 three at a time: the sim time of arming, and
-    with it the sensor noise the rover meets, varies from run to run (docs/architecture.md)."""
+    at the rover): with stepping aside off (``evasion.enabled=0``) the rover strikes a walker in
+    each; with it (the default) it steps aside, without contact. (World 25, used before, was a near
+    miss that went either way while a lockstep run's arming time followed the wall clock.)"""
     mission, world = write_inputs(scenarios(seed)["head_on"], tmp_path)
     out = tmp_path / "run"
     metrics = simulate(SimOptions(mission=mission, out=out, world=world, seed=seed,
@@ -86,3 +84,23 @@ def test_an_830_m_mission_completes_under_sim_defaults(tmp_path):
     assert metrics["success"], metrics
     assert metrics["waypoints_reached"] == metrics["waypoints_total"] == 83
     assert metrics["duration_s"] > 600.0  # longer than the old fixed budget allowed
+
+
+def test_a_lockstep_run_of_a_seed_is_the_same_every_time(tmp_path):
+    """Two ``rover-ctl sim`` runs of one world and seed drive the same, byte for byte in the
+    emulator's truth log up to the mission's end, however long the ground station's commands took
+    in wall time: the first frame waits for the daemon, the daemon steps every frame from the
+    first, everything a frame sends the vehicle precedes the frame's answer, and the arming lands
+    at the frame the clock is held at (ARM_AT_S; docs/architecture.md, "Lockstep handshake")."""
+    runs = []
+    for k in (1, 2):
+        folder = tmp_path / str(k)
+        folder.mkdir()
+        mission, world = write_inputs(scenarios(18)["head_on"], folder)
+        metrics = simulate(SimOptions(mission=mission, out=folder / "run", world=world, seed=18,
+                                      config_overrides=[f"executor.acceptance_radius_m={ACCEPTANCE_RADIUS_M}"]), plots=False)  # fmt: skip
+        end_s = ARM_AT_S + metrics["duration_s"]
+        truth = [line for line in (folder / "run" / "truth.jsonl").read_text().splitlines() if json.loads(line)["t_s"] <= end_s]
+        runs.append((metrics["duration_s"], metrics["path_length_m"], metrics["collisions"], truth))
+    assert runs[0][:3] == runs[1][:3]
+    assert runs[0][3] == runs[1][3]
