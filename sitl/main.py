@@ -259,9 +259,11 @@ class Emulator:
         armed, or ``HOLD_TIMEOUT_S`` wall seconds. Messages are applied at this frame's time as
         they come (a ground station's MISSION_START and arming, through the controller), so the
         arming and everything after it happen at the same frame in every run, however long the
-        ground station took. The marker is repeated as for an unanswered one: the controller
-        answers without stepping again, and hears from the vehicle."""
+        ground station took. The marker is repeated at once, then as for an unanswered one: a
+        watching ground station that sees a frame's marker twice knows the controller is done
+        with the frame; the controller answers without stepping again, and hears from the vehicle."""
         deadline = time.monotonic() + HOLD_TIMEOUT_S
+        self.send_marker()
         while not self.stop and not self.vehicle.armed and time.monotonic() < deadline:
             self.serve(min(self.marker.resend_in_s(), deadline - time.monotonic()))
             if self.marker.resend_in_s() <= 0:

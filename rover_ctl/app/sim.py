@@ -207,6 +207,9 @@ class Progress:
     armed: bool = False
     system_status: int = 0
     """MAV_STATE of the daemon's heartbeat (CRITICAL while a failsafe holds)."""
+    held_at_s: float | None = None
+    """Lockstep: the sim time of a frame whose end marker came twice (the emulator's clock held
+    there, the daemon done with the frame; or a marker not answered in 0.2 wall s)."""
     ready_to_arm: bool | None = None
     """SYS_STATUS's pre-arm health bit (MAV_SYS_STATUS_PREARM_CHECK); None until reported."""
     last_text: str = ""
@@ -273,6 +276,8 @@ class SimRun:
         self._logs: list[Any] = []
         self._last_rx_wall = time.monotonic()
         self._param_ack: dict[str, float] = {}
+        self._last_marker_s: float | None = None
+        """The watcher's last lockstep marker's time (``Progress.held_at_s``)."""
         self.send_heartbeats = True
         """Our GCS heartbeat at 1 Hz, as a ground station sends it (tests pause it for the GCS failsafe)."""
         self._next_heartbeat_wall = 0.0
@@ -545,7 +550,11 @@ class SimRun:
             elif msg.get_type() == "ATTITUDE":  # the emulator's own clock, at its sensor rate
                 self.progress.sim_time_s = max(self.progress.sim_time_s, msg.time_boot_ms / 1000.0)
             elif msg.get_type() == "TIMESYNC" and msg.tc1 == 0 and self.options.lockstep:  # a lockstep frame's end: its exact time
-                self.progress.sim_time_s = max(self.progress.sim_time_s, msg.ts1 / 1e9)
+                t_s = msg.ts1 / 1e9
+                if t_s == self._last_marker_s:
+                    self.progress.held_at_s = t_s
+                self._last_marker_s = t_s
+                self.progress.sim_time_s = max(self.progress.sim_time_s, t_s)
         self.progress.collisions += sum(r.get("type") == "collision" for r in self._truth.read())
         self._check_children()
 
@@ -622,8 +631,10 @@ class SimRun:
             self.start_mission()
         else:
             self.wait_for_position()
-            if not self.wait_for(lambda p: p.sim_time_s >= arm_at_s - 1e-9, wall_timeout_s=POSITION_TIMEOUT_S):
-                raise SimError(f"the emulator's clock did not reach {arm_at_s:g} s within {POSITION_TIMEOUT_S:g} s")
+            # The hold's marker twice: the daemon is done with that frame, so MISSION_START cannot
+            # come before its step there in one run and after it in another.
+            if not self.wait_for(lambda p: (p.held_at_s or 0.0) >= arm_at_s - 1e-9, wall_timeout_s=POSITION_TIMEOUT_S):
+                raise SimError(f"the emulator's clock did not stop at {arm_at_s:g} s within {POSITION_TIMEOUT_S:g} s")
             self.start_mission()
             self.arm()
         self.progress.started_sim_s = self.progress.sim_time_s
