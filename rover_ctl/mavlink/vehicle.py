@@ -574,6 +574,7 @@ class VehicleLink:
         held, self._unanswered = self._unanswered, None
         if held is not None:
             if held[:2] == self.lockstep_source:  # the frame it waits on: stepped, then answered
+                self._advance(held[2] / 1e9, alive=False)
                 self._released = FrameMarker(time_s=held[2] / 1e9, ts1_ns=held[2])
             else:
                 self._answer_timesync(held[2])
