@@ -27,7 +27,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
@@ -63,11 +63,16 @@ class SitlError(RuntimeError):
         return self.returncode == os.EX_UNAVAILABLE  # sitl.main's exit status for it
 
 
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A loopback port that is free right now (UDP by default)."""
-    with socket.socket(socket.AF_INET, kind) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+def free_port(kind: int = socket.SOCK_DGRAM, avoid: Collection[int] = ()) -> int:
+    """A loopback port that is free right now (UDP by default) and none of ``avoid``: the kernel
+    may hand out again a port whose socket it just closed, and two ports picked one after the
+    other for one run came out the same (a daemon's vehicle and GCS links on one UDP port)."""
+    while True:
+        with socket.socket(socket.AF_INET, kind) as sock:
+            sock.bind(("127.0.0.1", 0))
+            port = sock.getsockname()[1]
+        if port not in avoid:
+            return port
 
 
 def client_url(endpoint: str) -> str:

@@ -147,7 +147,7 @@ class FirmwareRun(SimRun):
         if binary is None:
             raise SimError(f"{options.firmware_dir / FIRMWARE}: no ArduPilot firmware")
         self.binary = binary
-        self.vehicle_port = free_port(socket.SOCK_DGRAM)
+        self.vehicle_port = free_port(socket.SOCK_DGRAM, avoid={self.gcs_port, self.watch_port})
         self.workdir = self.out / "ardupilot"
         self._truth_file: Any = None
         self._boot_ms: int | None = None
@@ -211,10 +211,12 @@ class FirmwareRun(SimRun):
                 conn.close()
         self.gcs = self.watcher = None
         self._truth_file.close()
-        self.gcs_port, self.watch_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+        taken = {self.vehicle_port} if self.options.line_baud else set()  # the relay's port is bound already
+        self.gcs_port = free_port(socket.SOCK_DGRAM, avoid=taken)
+        self.watch_port = free_port(socket.SOCK_DGRAM, avoid=taken | {self.gcs_port})
         self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
-        if not self.options.line_baud:  # the relay's port is bound already
-            self.vehicle_port = free_port(socket.SOCK_DGRAM)
+        if not self.options.line_baud:
+            self.vehicle_port = free_port(socket.SOCK_DGRAM, avoid={self.gcs_port, self.watch_port})
 
     def _check_children(self) -> None:
         for name, proc, log_path in (("ardurover", self.sitl, self.out / "sitl.log"), ("rover-ctl run", self.daemon, self.daemon_output)):

@@ -270,7 +270,7 @@ class SimRun:
         """Where a ground station reaches the daemon (it listens; every peer that speaks is served,
         so MAVProxy can attach to a running sim with ``--master`` this URL)."""
         self.progress.gcs_url = self.gcs_url
-        self.watch_port = free_port(socket.SOCK_DGRAM)
+        self.watch_port = free_port(socket.SOCK_DGRAM, avoid={self.gcs_port})
         self._key_dir: str | None = None
         """A private temporary folder for the daemon's key file (not the report folder, which is shared)."""
         self._logs: list[Any] = []
@@ -374,7 +374,7 @@ class SimRun:
 
     def _new_gcs_port(self) -> None:
         self.gcs.close()
-        self.gcs_port = free_port(socket.SOCK_DGRAM)
+        self.gcs_port = free_port(socket.SOCK_DGRAM, avoid={self.watch_port})
         self.gcs_url = self.progress.gcs_url = f"udpout:127.0.0.1:{self.gcs_port}"
 
     def _start_sitl(self) -> None:
@@ -395,7 +395,7 @@ class SimRun:
 
     def _new_sitl_ports(self) -> list[str]:
         self.vehicle_port = free_port(socket.SOCK_STREAM)
-        self.watch_port = free_port(socket.SOCK_DGRAM)
+        self.watch_port = free_port(socket.SOCK_DGRAM, avoid={self.gcs_port})
         return self._sitl_endpoints()
 
     def _start_daemon(self) -> None:

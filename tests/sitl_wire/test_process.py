@@ -238,3 +238,32 @@ def test_the_clock_held_at_a_time_goes_on_when_the_vehicle_is_armed() -> None:
         assert t_ns / 1e9 == pytest.approx(0.52)
         assert any(m.get_type() == "COMMAND_ACK" and m.result == mavutil.mavlink.MAV_RESULT_ACCEPTED for m in msgs)
         client.close()
+
+
+def test_a_port_picked_free_is_none_of_those_to_avoid(monkeypatch) -> None:
+    """The kernel may hand out a just-closed port again: two picks for one run came out the same
+    (a daemon's vehicle and GCS links on one UDP port, both bound with SO_REUSEADDR)."""
+    import sitl.launch as launch
+
+    handed = iter([40001, 40001, 40001, 40002])
+
+    class FakeSocket:
+        def __init__(self, *args) -> None:
+            self.port = next(handed)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc) -> None:
+            pass
+
+        def bind(self, address) -> None:
+            pass
+
+        def getsockname(self):
+            return ("127.0.0.1", self.port)
+
+    import types
+
+    monkeypatch.setattr(launch, "socket", types.SimpleNamespace(socket=FakeSocket, AF_INET=socket.AF_INET, SOCK_DGRAM=socket.SOCK_DGRAM))
+    assert launch.free_port(avoid={40001}) == 40002
