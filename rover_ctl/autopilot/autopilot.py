@@ -270,20 +270,13 @@ class Autopilot:
     # ---- ground-station requests -----------------------------------------------------------------
 
     def arm(self, arm: bool, force: bool = False) -> Reply:
-        if arm and self.sensor_error is not None:  # not even forced: the rover cannot be driven
-            self._say(f"PreArm: {self.sensor_error}", Severity.CRITICAL)
-            return Reply(mav.MAV_RESULT_DENIED, self.sensor_error)
-        if arm and self.armed:
+        if arm and self.armed and self.sensor_error is None:
             return ACCEPTED
-        if arm and self.rangefinder_plan is None and not force:
-            self._say("PreArm: rangefinders not known yet", Severity.CRITICAL)
-            return Reply(mav.MAV_RESULT_TEMPORARILY_REJECTED, "rangefinders not known yet")
-        if arm and not force:
-            failed = prearm.failures(self._arming_inputs())
-            if failed:
-                for text in failed:
-                    self._say(f"PreArm: {text}", Severity.CRITICAL)
-                return Reply(mav.MAV_RESULT_FAILED, failed[0])
+        if arm and (refusal := self._arming_refusal(force)) is not None:
+            result, texts = refusal
+            for text in texts:
+                self._say(f"PreArm: {text}", Severity.CRITICAL)
+            return Reply(result, texts[0])
         self._outbox.append(ArmRequest(arm, force))
         return ACCEPTED
 
@@ -291,9 +284,19 @@ class Autopilot:
         """Whether an arming request now would pass the daemon's own checks (armed: True), the
         ground station's "ready" light (SYS_STATUS's MAV_SYS_STATUS_PREARM_CHECK, as ArduPilot
         reports it). The vehicle's own checks come on top, when it is asked."""
-        if self.armed:
-            return True
-        return self.sensor_error is None and self.rangefinder_plan is not None and not prearm.failures(self._arming_inputs())
+        return self.armed or self._arming_refusal() is None
+
+    def _arming_refusal(self, force: bool = False) -> tuple[int, list[str]] | None:
+        """(MAV_RESULT, reasons) of the daemon's checks refusing an arming, or None. A sensor the
+        rover cannot be driven without refuses even a forced one."""
+        if self.sensor_error is not None:
+            return mav.MAV_RESULT_DENIED, [self.sensor_error]
+        if force:
+            return None
+        if self.rangefinder_plan is None:
+            return mav.MAV_RESULT_TEMPORARILY_REJECTED, ["rangefinders not known yet"]
+        failed = prearm.failures(self._arming_inputs())
+        return (mav.MAV_RESULT_FAILED, failed) if failed else None
 
     def set_mode(self, custom_mode: int, reason: str = "gcs") -> Reply:
         why = modes.unsupported(custom_mode)

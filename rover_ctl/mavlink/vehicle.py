@@ -743,7 +743,7 @@ class VehicleLink:
         while self.vehicle is None:
             if cancelled():
                 return None
-            if self.rx_bytes >= WRONG_BAUD_BYTES and self.frames_received == 0 and budget.is_serial(self.url):
+            if self.rx_bytes >= WRONG_BAUD_BYTES and self.frames_received == 0 and self._serial:
                 baud = budget.serial_baud(self.url) or PYMAVLINK_DEFAULT_BAUD
                 raise LinkError(f"vehicle link {self.url}: {self.rx_bytes} bytes but not one MAVLink frame at "
                                 f"{baud} baud: wrong baud rate? (write DEVICE,BAUD, e.g. /dev/ttyUSB0,57600)")  # fmt: skip
