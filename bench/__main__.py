@@ -25,11 +25,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
-import platform
 import signal
 import sys
 import time
 from pathlib import Path
+
+from bench import machine
 
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results"
@@ -67,6 +68,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     RESULTS.mkdir(exist_ok=True)
     for name in names:
         print(f"== bench {name}", flush=True)
+        reference_ms = machine.fresh_reference_ms()
         started = time.perf_counter()
         options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds),
                                      ("variants", args.variants and args.variants.split(",")), ("rulebase", args.rulebase),
@@ -84,9 +86,10 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             result = module.run(quick=args.quick, **options)
         except ValueError as exc:  # a bad --rulebase file, an unreachable --scheduler
             parser.error(str(exc))
-        result.setdefault("machine", f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()}".strip())
+        wall_s = time.perf_counter() - started
+        result.setdefault("machine", machine.describe(reference_ms, machine.fresh_reference_ms()))
         result.setdefault("date", time.strftime("%Y-%m-%d"))
-        result["wall_s"] = round(time.perf_counter() - started, 1)
+        result["wall_s"] = round(wall_s, 1)
         path = RESULTS / f"{result.get('name', name)}.json"
         if path.exists() and "notes" not in result:
             try:
@@ -106,7 +109,11 @@ def write_doc() -> None:
     parts = [
         "# Benchmarks\n",
         "Written by `python -m bench` (or `make bench`) from `bench/results/*.json`; every figure "
-        "below was measured by the run named in its section, on the machine it names.\n",
+        "below was measured by the run named in its section, on the machine it names. Since 2026-11-27 "
+        "that names the CPU and a reference time: the CPU time of a fixed pure-Python workload "
+        "(`bench/machine.py`). This machine is a virtual machine whose host changes from day to day "
+        "(the same tree ran the SITL benchmark 2.4 times slower on 2026-11-27 than on 2026-11-22): "
+        "compare CPU times and real-time factors of two runs only with their reference times beside them.\n",
     ]
     for path in sorted(RESULTS.glob("*.json")):
         result = json.loads(path.read_text())

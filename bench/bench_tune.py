@@ -135,15 +135,16 @@ def record_run(result_path: Path, note: str = "") -> dict[str, Any]:
 
 if __name__ == "__main__":
     import json
-    import platform
     import sys
 
+    from bench import machine
     from bench.__main__ import RESULTS, write_doc
 
     if len(sys.argv) not in (3, 4) or sys.argv[1] != "record":
         sys.exit("usage: python -m bench.bench_tune record RUN_DIR/result.json [NOTE]")
     record = record_run(Path(sys.argv[2]), sys.argv[3] if len(sys.argv) == 4 else "")
-    record["machine"] = f"{platform.machine()} python {platform.python_version()}"
+    reference_ms = machine.fresh_reference_ms()  # the run is over: one reading stands for both
+    record["machine"] = machine.describe(reference_ms, reference_ms)
     record["date"] = time.strftime("%Y-%m-%d")
     record["wall_s"] = round(record["result"]["search_wall_s"] + record["result"]["holdout_wall_s"], 1)
     (RESULTS / "tune_run.json").write_text(json.dumps(record, indent=2, default=float) + "\n")
