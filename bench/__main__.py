@@ -68,8 +68,6 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     RESULTS.mkdir(exist_ok=True)
     for name in names:
         print(f"== bench {name}", flush=True)
-        reference_ms = machine.fresh_reference_ms()
-        started = time.perf_counter()
         options = {k: v for k, v in (("only", args.only and args.only.split(",")), ("worlds", args.worlds),
                                      ("variants", args.variants and args.variants.split(",")), ("rulebase", args.rulebase),
                                      ("scheduler", args.scheduler)) if v}  # fmt: skip
@@ -82,6 +80,8 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         unknown = sorted(set(options.get("variants", ())) - set(getattr(module, "VARIANTS", ())))
         if unknown:
             parser.error(f"unknown variant(s) {', '.join(unknown)} (known: {', '.join(module.VARIANTS)})")
+        reference_ms = machine.fresh_reference_ms()
+        started = time.perf_counter()
         try:
             result = module.run(quick=args.quick, **options)
         except ValueError as exc:  # a bad --rulebase file, an unreachable --scheduler
@@ -112,7 +112,7 @@ def write_doc() -> None:
         "below was measured by the run named in its section, on the machine it names. Since 2026-11-27 "
         "that names the CPU and a reference time: the CPU time of a fixed pure-Python workload "
         "(`bench/machine.py`). This machine is a virtual machine whose host changes from day to day "
-        "(the same tree ran the SITL benchmark 2.4 times slower on 2026-11-27 than on 2026-11-22): "
+        "(the same tree ran the SITL benchmark 2.3-2.4 times slower on 2026-11-27 than on 2026-11-22): "
         "compare CPU times and real-time factors of two runs only with their reference times beside them.\n",
     ]
     for path in sorted(RESULTS.glob("*.json")):
