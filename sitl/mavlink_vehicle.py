@@ -10,7 +10,9 @@ ArduPilot behaviours reproduced (see docs/sitl.md):
   channel as it was (MAVLink spec); each channel times out after RC_OVERRIDE_TIME -> trim.
 - Motors follow the mixer only when armed and in MANUAL; disarmed or HOLD -> trim (1500 us).
 - COMMAND_LONG always gets a COMMAND_ACK; arming refused with MAV_RESULT_FAILED and a
-  "PreArm:" STATUSTEXT unless checks pass or param2 = 21196 (force).
+  "PreArm:" STATUSTEXT unless checks pass or param2 = 21196 (force). The GPS check reads the
+  receiver's state as ArduPilot's AP_GPS keeps it: the last fix stands until GPS_TIMEOUT_S without
+  one, so a single dropped epoch does not refuse an arming.
 - WHEEL_DISTANCE is only in the EXTRA1 stream: SET_MESSAGE_INTERVAL cannot set it.
 """
 
@@ -36,6 +38,9 @@ STEERING_CHANNEL = 0
 THROTTLE_CHANNEL = 2
 """Zero-based RC channel indexes: ch1 steering, ch3 throttle (ArduPilot Rover defaults)."""
 STATUSTEXT_MAX_CHARS = 50
+GPS_TIMEOUT_S = 4.0
+"""How long the last GPS fix stands for the arming check with no new one (ArduPilot's
+AP_GPS GPS_TIMEOUT_MS, after which it marks the receiver NO_GPS)."""
 LOCKSTEP_ANNOUNCEMENT = b"lockstep"
 """AUTOPILOT_VERSION.flight_custom_version in lockstep: tells a controller that this vehicle's
 TIMESYNC requests are end-of-frame markers (docs/architecture.md, "Lockstep handshake")."""
@@ -140,6 +145,8 @@ class MavlinkVehicle:
                                  "ranges": 1.0 / sensors.rangefinder.rate_hz, "wheels": 1.0 / sensors.encoder.rate_hz}
         self.sensor_next_s = dict.fromkeys(self.sensor_periods_s, 0.0)
         self.gps = self.attitude = self.wheels = None
+        self._fix_s: float | None = None
+        """Sim time of the last GPS sample with a 3D fix (the arming check's, ``GPS_TIMEOUT_S``)."""
         self.ranges: list = []
         self.lockstep = False
         """Announced in AUTOPILOT_VERSION (set by the main loop in --lockstep)."""
@@ -222,7 +229,7 @@ class MavlinkVehicle:
     def _command(self, msg, t_s: float) -> list:
         command = msg.command
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            result = self._arm(msg.param1 >= 0.5, msg.param2 == FORCE_ARM_MAGIC)  # as ArduPilot, a float compare
+            result = self._arm(msg.param1 >= 0.5, msg.param2 == FORCE_ARM_MAGIC, t_s)  # as ArduPilot, a float compare
         elif command in (mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE) \
                 and not (math.isfinite(msg.param1) and math.isfinite(msg.param2)):
             result = mavlink.MAV_RESULT_FAILED  # a mode, a message id, an interval: NaN or inf is none of them
@@ -238,7 +245,7 @@ class MavlinkVehicle:
             result = mavlink.MAV_RESULT_UNSUPPORTED
         return [mavlink.MAVLink_command_ack_message(command, result)]
 
-    def _arm(self, arm: bool, force: bool) -> int:
+    def _arm(self, arm: bool, force: bool, t_s: float) -> int:
         if not arm:
             if self.armed:
                 self.say(mavlink.MAV_SEVERITY_INFO, "Throttle disarmed")
@@ -247,8 +254,7 @@ class MavlinkVehicle:
         if self.armed:
             return mavlink.MAV_RESULT_ACCEPTED
         if not force and self.arming_check:
-            gps = self.gps
-            if gps is None or gps.fix_type < mavlink.GPS_FIX_TYPE_3D_FIX:
+            if self._fix_s is None or t_s - self._fix_s > GPS_TIMEOUT_S:
                 self.say(mavlink.MAV_SEVERITY_CRITICAL, "PreArm: GPS 1: Bad fix")
                 return mavlink.MAV_RESULT_FAILED
         self.armed = True
@@ -316,6 +322,8 @@ class MavlinkVehicle:
             self.sensor_next_s[name] = next_slot(self.sensor_next_s[name], self.sensor_periods_s[name], t_s)
         if "gps" in due:
             self.gps = self.rover.gps()
+            if self.gps is not None:  # a 2D fix or none marks the receiver so at once; a dropout does not
+                self._fix_s = t_s if self.gps.fix_type >= mavlink.GPS_FIX_TYPE_3D_FIX else None
             if self.on_gps is not None:
                 self.on_gps(self.gps)
         if "imu" in due:

@@ -328,7 +328,7 @@ class Episode:
         if not self.arm_sent:
             accepted = ap.arm(True).accepted
             self._events(ap.drain(), t_s)
-            # The vehicle answers at once here; a refusal (no 3D fix at that instant) is asked
+            # The vehicle answers at once here; a refusal (no 3D fix for GPS_TIMEOUT_S) is asked
             # again at the next step, as rover-ctl sim asks again on a refused COMMAND_ACK.
             self.arm_sent = accepted and self.vehicle.armed
             if not self.arm_sent:

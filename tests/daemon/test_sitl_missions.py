@@ -146,13 +146,15 @@ def test_the_ground_station_hears_the_vehicles_answer_to_arming(tmp_path):
     the fix back the same command arms. The daemon's own GPS check is given a long window here so
     that the vehicle's check is the one that decides."""
     from rover_ctl.vocabulary import mav
+    from sitl.mavlink_vehicle import GPS_TIMEOUT_S
 
     options = SimOptions(mission=JUMP, out=tmp_path / "run", timeout_s=60.0, config_overrides=["estimator.gps_timeout_s=60"])
     with SimRun(options) as run:
         assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
         assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False  # the rangefinders known
         run.sitl_param("SIM_GPS_DISABLE", 1)
-        assert run.wait_for(lambda p: False, sim_timeout_s=1.0) is False  # the vehicle's fix is gone
+        # The vehicle's fix is gone once its last one is older than ArduPilot's GPS timeout.
+        assert run.wait_for(lambda p: False, sim_timeout_s=GPS_TIMEOUT_S + 1.0) is False
         assert run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_FAILED
         assert any(t.startswith("Vehicle refused arming") for t in run.progress.texts)
         # The vehicle's own reason is passed on (CRITICAL, as ArduPilot sends its PreArm texts).
