@@ -424,6 +424,7 @@ class SimRun:
         self.daemon_log_run = log_run
         self.daemon_output = Path(log_run) / "daemon.log"
         self.daemon_output.parent.mkdir(parents=True, exist_ok=True)
+        self.progress.position_en = None  # the old daemon's: the new one reports its own once it has one
         self._start_daemon()
 
     def _check_children(self) -> None:
@@ -466,8 +467,10 @@ class SimRun:
 
     def command(self, command: int, *params: float, timeout_s: float = 5.0) -> int:
         """COMMAND_LONG to the daemon; returns the MAV_RESULT (-1: no answer). Messages seen
-        while waiting update the progress."""
+        while waiting update the progress. Only an ACK addressed to this ground station answers
+        (the daemon's GCS port sends every peer's ACKs to each peer: a CLI's, MAVProxy's)."""
         target = self.gcs.target
+        me = (self.gcs.conn.source_system, self.gcs.conn.source_component)
         padded = tuple(params) + (0.0,) * (7 - len(params))
         deadline = time.monotonic() + timeout_s
         next_send = 0.0
@@ -480,7 +483,7 @@ class SimRun:
                 self._check_children()
                 continue
             self._observe(msg)
-            if msg.get_type() == "COMMAND_ACK" and msg.command == command:
+            if msg.get_type() == "COMMAND_ACK" and msg.command == command and (msg.target_system, msg.target_component) == me:
                 return msg.result
         return -1
 
@@ -509,6 +512,18 @@ class SimRun:
                 return
             self.wait_for(lambda p: False, wall_timeout_s=ARM_RETRY_S)
         raise SimError(f"the rover did not arm within {timeout_s:g} s: {self.progress.last_text}")
+
+    def arming_answer(self, timeout_s: float = POSITION_TIMEOUT_S, force: bool = False) -> int:
+        """The daemon's answer (MAV_RESULT) to an arming request once it has a position, asked
+        again while it is TEMPORARILY_REJECTED (its rangefinders are counted for
+        ``link.rangefinder_discovery_s`` after the first reading), as a ground station would."""
+        self.wait_for_position(timeout_s)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            result = self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, ARM_FORCE_MAGIC if force else 0)
+            if result != mav.MAV_RESULT_TEMPORARILY_REJECTED or time.monotonic() >= deadline:
+                return result
+            self.wait_for(lambda p: False, wall_timeout_s=ARM_RETRY_S)
 
     def set_mode(self, custom_mode: int) -> int:
         return self.command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode)

@@ -20,7 +20,6 @@ most of it the firmware finding its GPS and settling its IMUs).
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import pytest
@@ -179,22 +178,9 @@ def test_a_rule_base_side_the_rover_lacks_is_refused_at_arming(tmp_path):
     options = FirmwareOptions(mission=MISSION, out=tmp_path / "run", lockstep=False, speedup=10, rangefinders="three",
                               rulebase="paper", config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
     with FirmwareRun(options) as run:
-        assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
-        assert _arming_answer(run) == mav.MAV_RESULT_DENIED
+        assert run.arming_answer(timeout_s=30.0) == mav.MAV_RESULT_DENIED
     # The user's one line, in the daemon's log (the STATUSTEXT is the first 50 characters of it).
     assert "the rule base reads obstacle_back (4) but the rover has no such rangefinder" in (tmp_path / "run" / "daemon.log").read_text()
-
-
-def _arming_answer(run: FirmwareRun, wall_timeout_s: float = 30.0) -> int:
-    """The daemon's answer to an arming request, asked again while it is TEMPORARILY_REJECTED (the
-    rangefinders are counted for ``rangefinder_discovery_s`` after the first reading, which can end
-    after the position comes on a loaded host), as a ground station would."""
-    deadline = time.monotonic() + wall_timeout_s
-    result = run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-    while result == mav.MAV_RESULT_TEMPORARILY_REJECTED and time.monotonic() < deadline:
-        run.wait_for(lambda p: False, wall_timeout_s=0.5)
-        result = run.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-    return result
 
 
 def _events(out: Path) -> list[dict]:
@@ -234,8 +220,7 @@ def test_stock_pilot_steer_type_refuses_arming_and_says_what_to_set(tmp_path):
     options = FirmwareOptions(mission=MISSION, out=tmp_path / "run", lockstep=False, speedup=10, rangefinders="none",
                               params={"PILOT_STEER_TYPE": 0}, config_overrides=list(ARDUPILOT_WHEELS))  # fmt: skip
     with FirmwareRun(options) as run:
-        assert run.wait_for(lambda p: p.position_en is not None, wall_timeout_s=30.0)
-        assert _arming_answer(run) == mav.MAV_RESULT_FAILED
+        assert run.arming_answer(timeout_s=30.0) == mav.MAV_RESULT_FAILED
         reason = "PILOT_STEER_TYPE 0 reverses steering in reverse: set 3"
         assert run.wait_for(lambda p: f"PreArm: vehicle {reason}" in p.texts, wall_timeout_s=5.0), run.progress.texts
     events = _events(tmp_path / "run")

@@ -64,7 +64,7 @@ def test_every_rangefinder_failing_holds_within_a_second_and_names_them(tmp_path
         run.sitl_param("SIM_RF_FAIL", ALL_RANGEFINDERS)
         assert run.wait_for(lambda p: False, sim_timeout_s=5.0) is False
         # Held in AUTO, not switched out of it; heartbeats are 1 Hz of wall time (a few s of lockstep).
-        assert run.wait_for(lambda p: p.mode == RoverMode.AUTO, wall_timeout_s=3.0) and 2 not in run.progress.reached
+        assert run.wait_for(lambda p: p.mode == RoverMode.AUTO, wall_timeout_s=10.0) and 2 not in run.progress.reached
         held_texts = [t for t in run.progress.texts if t.endswith("silent, hold")]
         run.sitl_param("SIM_RF_FAIL", 0)
         assert run.wait_for(lambda p: p.complete, sim_timeout_s=250.0), run.progress
@@ -109,9 +109,9 @@ def test_daemon_killed_mid_mission_keeps_the_rover_stopped_then_resumes_as_mis_r
         run.restart_daemon(tmp_path / "after")
         run.progress.reached.clear()
         # The new daemon reports the stored mission, holds, and says where AUTO would go on.
-        assert run.wait_for(lambda p: p.mission_state == MissionState.NOT_STARTED and p.current_seq == (3 if restart == 0 else 1),
-                            wall_timeout_s=60.0), run.progress  # fmt: skip
-        assert run.wait_for(lambda p: p.mode == RoverMode.HOLD, wall_timeout_s=3.0)  # the new daemon's heartbeat (1 Hz wall)
+        assert run.wait_for(lambda p: p.mission_state == MissionState.NOT_STARTED and p.current_seq == (3 if restart == 0 else 1)
+                            and p.position_en is not None, wall_timeout_s=60.0), run.progress  # fmt: skip
+        assert run.wait_for(lambda p: p.mode == RoverMode.HOLD, wall_timeout_s=10.0)  # the new daemon's heartbeat (1 Hz wall)
         assert run.wait_for(lambda p: False, sim_timeout_s=3.0) is False
         stopped_s = run.progress.sim_time_s
         assert run.set_mode(RoverMode.AUTO) == 0

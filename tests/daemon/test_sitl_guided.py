@@ -63,6 +63,7 @@ def test_cli_arms_and_switches_modes_and_guided_drives_to_each_kind_of_target(tm
         url = run.gcs_url
         assert run.wait_for(lambda p: p.position_en is not None and p.mission_state == MissionState.NOT_STARTED, wall_timeout_s=30.0)
         assert run.progress.items_total == 4
+        assert run.arming_answer(timeout_s=30.0) == mav.MAV_RESULT_FAILED  # the rangefinders counted: a refusal, not "later"
 
         refused = rover_ctl("arm", "--connect", url)
         assert refused.returncode == 1, refused

@@ -25,6 +25,8 @@ pytestmark = pytest.mark.interop
 MISSIONS = Path(__file__).resolve().parents[2] / "missions"
 VENV_BIN = Path(sys.executable).parent
 LINK = GcsParams(heartbeat_period_s=0.2)
+MAVPROXY_STARTUP_S = 60.0
+"""Wall seconds allowed for MAVProxy's first line (the wait returns as soon as it comes)."""
 
 
 class MavProxy:
@@ -52,6 +54,8 @@ class MavProxy:
         self.proc.stdin.flush()
 
     def wait_for(self, text: str, timeout_s: float = 10.0) -> str:
+        if not self.seen:  # its first line comes after its own start-up, seconds on a loaded 2-core host
+            timeout_s = max(timeout_s, MAVPROXY_STARTUP_S)
         end = time.monotonic() + timeout_s
         while (left := end - time.monotonic()) > 0:
             try:
