@@ -154,7 +154,7 @@ def test_first_leg_in_real_time(tmp_path, emulator):
     with FirmwareRun(options) as run:
         run.arm()
         run.start_mission()
-        assert run.wait_for(lambda p: 1 in p.reached, wall_timeout_s=60.0), run.progress
+        assert run.wait_for(lambda p: 1 in p.reached, sim_timeout_s=60.0, wall_timeout_s=240.0), run.progress  # the firmware lags real time on a loaded host
         assert run.progress.reached == {1}
 
 
