@@ -655,6 +655,14 @@ class SideGuardParams:
     """Yaw rate at a reading of 0 m (rad/s), in proportion below ``range_m``: 1.18 rad/s at 0.2 m.
     0.35 and 0.45 m, 2.75 and 4.58 rad/s did about equally well in the in-process runner
     (docs/perception.md "Flank contacts")."""
+    pass_speed_mps: float = 1.2
+    """While the guard turns and the way ahead is clear, the rover keeps at least this forward speed
+    (m/s; never above the speed it was given; 0: off): slowed beside an obstacle that moves, it kept
+    the obstacle alongside until it closed on the flank. 0.8, 1.0 and 1.2 m/s did about as well
+    (docs/perception.md "Flank contacts")."""
+    front_clear_m: float = 1.5
+    """The way ahead is clear when every front rangefinder the rover has (front and the two front
+    diagonals) reads beyond this (m); 1.0 and 2.5 m changed nothing in the in-process runner."""
 
 
 @dataclass

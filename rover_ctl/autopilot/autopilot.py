@@ -59,7 +59,7 @@ from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
-from rover_ctl.navigation.side_guard import side_turn_radps
+from rover_ctl.navigation.side_guard import pass_speed_mps, side_turn_radps
 from rover_ctl.navigation.yielding import Yielder
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
@@ -73,7 +73,7 @@ LOG_COLUMNS = (
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
-    "map_obstacles", "evade_track", "side_turn_radps",
+    "map_obstacles", "evade_track", "side_turn_radps", "side_pass_mps",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 _EMPTY_ROW = dict.fromkeys(LOG_COLUMNS, "")
@@ -600,6 +600,11 @@ class Autopilot:
         left, right = nav.left_rpm, nav.right_rpm
         side_turn = side_turn_radps(ranges, self.config.side_guard)  # something at a flank: turn away from it
         if side_turn:
+            floor_mps = None if yielding else pass_speed_mps(ranges, speed_mps, self.config.side_guard)
+            if floor_mps is not None and (left + right) / 2.0 < (floor_rpm := self._speed_to_rpm(floor_mps)):
+                raise_rpm = floor_rpm - (left + right) / 2.0  # draw ahead of it, the turn kept
+                left, right = left + raise_rpm, right + raise_rpm
+                row.update(side_pass_mps=floor_mps)
             half_rpm = self._speed_to_rpm(side_turn * self.config.robot.track_m / 2.0)
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)

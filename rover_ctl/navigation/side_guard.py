@@ -26,6 +26,19 @@ by the failsafe, pushes nothing: the failsafe slows the rover for it already. A 
 1 m/s along a wall 0.22 m from its side turns away by 18 degrees until the wall reads beyond
 ``range_m`` (tests/navigator/test_side_guard.py); the rule base then steers it back towards its
 target.
+
+**Passing, not escorting.** While the guard turns the rover away, the rule base turns it back
+towards its target, and slows to turn: the two settle on a heading a little off the course at a
+crawl (0.45 m/s with a 0.25 m left reading and the way ahead clear, tests/navigator/
+test_side_guard.py, against 1.2 m/s of cruise). Beside a drum that moves the rover's way, or
+crosses from behind its flank, that keeps the two abreast: the rover at 0.35-0.45 m/s and the drum
+at about the same, its side reading at 0.2-0.3 m for seconds, until the drum closes on the flank
+(the runner's ``crossing`` seeds 23, 45 and 58). So while the
+guard turns and the way ahead is clear (every front rangefinder the rover has, front and both
+front diagonals, reading beyond ``front_clear_m``), ``pass_speed_mps`` is a floor on the forward
+speed (never above the speed the rover was given): it draws ahead of what is at its side, a
+static obstacle or a moving one, instead of staying beside it. The autopilot raises both wheels
+by the same amount, so the turn is kept; not while a yield holds the rover back.
 """
 
 from __future__ import annotations
@@ -36,6 +49,8 @@ from rover_ctl.config import SideGuardParams
 from rover_ctl.vocabulary import mav
 
 LEFT, RIGHT = mav.MAV_SENSOR_ROTATION_YAW_270, mav.MAV_SENSOR_ROTATION_YAW_90
+AHEAD = (mav.MAV_SENSOR_ROTATION_NONE, mav.MAV_SENSOR_ROTATION_YAW_45, mav.MAV_SENSOR_ROTATION_YAW_315)
+"""The front rangefinder and the two front diagonals: the way ahead."""
 
 
 def side_turn_radps(ranges_m: Mapping[int, float], params: SideGuardParams) -> float:
@@ -51,3 +66,16 @@ def side_turn_radps(ranges_m: Mapping[int, float], params: SideGuardParams) -> f
         return min((params.range_m - max(range_m, 0.0)) / params.range_m, 1.0)
 
     return params.max_yaw_rate_radps * (push(RIGHT) - push(LEFT))
+
+
+def pass_speed_mps(ranges_m: Mapping[int, float], given_speed_mps: float, params: SideGuardParams) -> float | None:
+    """The least forward speed (m/s) while the guard turns and the way ahead is clear: the smaller
+    of ``params.pass_speed_mps`` and ``given_speed_mps``; None when the guard does not turn, a front
+    reading is within ``params.front_clear_m`` (or not a number), the rover has no front
+    rangefinder, or the floor is off."""
+    if params.pass_speed_mps <= 0.0 or side_turn_radps(ranges_m, params) == 0.0:
+        return None
+    ahead = [ranges_m[o] for o in AHEAD if o in ranges_m]
+    if not ahead or not all(r > params.front_clear_m for r in ahead):  # NaN is not clear
+        return None
+    return max(min(params.pass_speed_mps, given_speed_mps), 0.0)

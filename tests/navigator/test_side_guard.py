@@ -9,7 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from rover_ctl.config import SideGuardParams
-from rover_ctl.navigation.side_guard import LEFT, RIGHT, side_turn_radps
+from rover_ctl.navigation.side_guard import LEFT, RIGHT, pass_speed_mps, side_turn_radps
+from rover_ctl.vocabulary import RoverMode
 
 PARAMS = SideGuardParams()
 
@@ -57,3 +58,47 @@ def test_a_rover_driven_along_a_wall_too_close_is_bent_away_until_clear():
         x, y = x + math.cos(heading) * 0.04, y + math.sin(heading) * 0.04
     assert x - half_width_m - wall_x >= PARAMS.range_m - 0.05  # clear of the guard's range, about
     assert math.degrees(math.pi / 2 - heading) == pytest.approx(18.3, abs=1.0)  # bent right, and no more
+
+
+FRONT, FRONT_LEFT, FRONT_RIGHT = 0, 7, 1
+
+
+def test_beside_something_with_the_way_ahead_clear_the_rover_keeps_its_passing_speed():
+    ahead_clear = {FRONT: 3.0, FRONT_LEFT: math.inf, FRONT_RIGHT: 2.0}
+    assert pass_speed_mps({LEFT: 0.25, **ahead_clear}, 1.5, PARAMS) == PARAMS.pass_speed_mps
+    assert pass_speed_mps({RIGHT: 0.25, **ahead_clear}, 0.5, PARAMS) == 0.5  # never above the speed given
+    assert pass_speed_mps({LEFT: 0.25, FRONT: 3.0}, 1.5, PARAMS) == PARAMS.pass_speed_mps  # a front sensor only
+
+
+def test_no_passing_speed_without_a_turn_with_something_ahead_or_no_way_to_see_ahead():
+    assert pass_speed_mps({LEFT: 1.0, FRONT: math.inf}, 1.5, PARAMS) is None  # the guard does not turn
+    assert pass_speed_mps({LEFT: 0.25, FRONT: math.inf, FRONT_LEFT: PARAMS.front_clear_m}, 1.5, PARAMS) is None
+    assert pass_speed_mps({LEFT: 0.25, FRONT: math.nan}, 1.5, PARAMS) is None  # NaN: not clear
+    assert pass_speed_mps({LEFT: 0.25}, 1.5, PARAMS) is None  # no front rangefinder: ahead unknown
+    assert pass_speed_mps({LEFT: 0.25, FRONT: math.inf}, 1.5, SideGuardParams(pass_speed_mps=0.0)) is None
+    assert pass_speed_mps({LEFT: 0.25, FRONT: math.inf}, 1.5, SideGuardParams(enabled=False)) is None
+
+
+def _mean_speed_beside_a_close_left_reading(params: SideGuardParams, front_m: float) -> float:
+    """The autopilot in closed loop (tests/autopilot/harness.py) on a leg 30 m north, its left
+    rangefinder at 0.25 m all along, its front ones at ``front_m``: mean speed over 3-6 s."""
+    from autopilot.harness import Bench, mission
+
+    bench = Bench()
+    bench.config.side_guard = params
+    bench.ranges_m.update({LEFT: 0.25, FRONT: front_m, FRONT_LEFT: front_m, FRONT_RIGHT: front_m})
+    bench.ready(mission((0.0, 30.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    bench.run(3.0)
+    speeds = []
+    bench.run(3.0, until=lambda b: speeds.append(b.speed_mps) and False)
+    return sum(speeds) / len(speeds)
+
+
+def test_the_autopilot_draws_ahead_of_a_flank_reading_only_with_the_way_ahead_clear():
+    slowed = _mean_speed_beside_a_close_left_reading(SideGuardParams(pass_speed_mps=0.0), math.inf)
+    passing = _mean_speed_beside_a_close_left_reading(PARAMS, math.inf)
+    blocked = _mean_speed_beside_a_close_left_reading(PARAMS, 1.0)
+    assert slowed < 0.6 * PARAMS.pass_speed_mps  # the rule base slows for the close reading
+    assert passing > 0.8 * PARAMS.pass_speed_mps
+    assert blocked == pytest.approx(_mean_speed_beside_a_close_left_reading(SideGuardParams(pass_speed_mps=0.0), 1.0))

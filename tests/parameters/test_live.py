@@ -275,17 +275,21 @@ def ex_evasion(d: Daemon) -> list:
 
 def ex_side_guard(d: Daemon) -> list:
     """The rule base's wheels along a leg north, with something at the left or right flank at
-    several ranges (the side guard turns the rover away from it)."""
+    several ranges (the side guard turns the rover away from it), then turned 35 degrees right of
+    the leg (the rule base slows to turn back; the guard keeps the passing speed while the front
+    reads clear), the last with something ahead too."""
     from rover_ctl.estimation.readings import RangeReading
 
     ap, trace = d.autopilot, []
-    pose = SimpleNamespace(east_m=0.0, north_m=0.0, heading_rad=math.pi / 2, speed_mps=1.0)
     clear = FailsafeDecision(Action.NONE, (), (), frozenset(), False, False)
-    for k, (left_m, right_m) in enumerate(((4.0, 4.0), (0.2, 4.0), (0.3, 4.0), (4.0, 0.25), (0.45, 0.3), (0.2, 0.2))):
-        ap._ranges = {o: RangeReading(k * 10.0, o, o, r, 0.2, 4.0) for o, r in ((6, left_m), (2, right_m), (0, 4.0))}
+    cases = ((4.0, 4.0, 4.0, 0), (0.2, 4.0, 4.0, 0), (0.3, 4.0, 4.0, 0), (4.0, 0.25, 4.0, 0), (0.45, 0.3, 4.0, 0), (0.2, 0.2, 4.0, 0),
+             (0.25, 4.0, 4.0, -35), (0.25, 4.0, 1.2, -35))  # fmt: skip
+    for k, (left_m, right_m, front_m, off_deg) in enumerate(cases):
+        pose = SimpleNamespace(east_m=0.0, north_m=0.0, heading_rad=math.pi / 2 + math.radians(off_deg), speed_mps=1.0)
+        ap._ranges = {o: RangeReading(k * 10.0, o, o, r, 0.2, 4.0) for o, r in ((6, left_m), (2, right_m), (0, front_m))}
         row = dict.fromkeys(LOG_COLUMNS, "")
         ap._drive(k * 10.0, 0.04, pose, (0.0, 20.0), 1.2, 1, clear, row)  # 10 s apart: the memory forgets
-        trace.append((round(row["left_set_rpm"], 9), round(row["right_set_rpm"], 9), row["side_turn_radps"]))
+        trace.append((round(row["left_set_rpm"], 9), round(row["right_set_rpm"], 9), row["side_turn_radps"], row["side_pass_mps"]))
     return trace
 
 
