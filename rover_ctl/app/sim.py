@@ -475,6 +475,7 @@ class SimRun:
         deadline = time.monotonic() + timeout_s
         next_send = 0.0
         while time.monotonic() < deadline:
+            self._heartbeat()  # a ground station waiting for an answer is still there
             if time.monotonic() >= next_send:
                 self.gcs.conn.mav.command_long_send(target[0], target[1], command, 0, *padded)
                 next_send = time.monotonic() + 1.0
