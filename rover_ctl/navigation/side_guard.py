@@ -33,12 +33,12 @@ crawl (0.45 m/s with a 0.25 m left reading and the way ahead clear, tests/naviga
 test_side_guard.py, against 1.2 m/s of cruise). Beside a drum that moves the rover's way, or
 crosses from behind its flank, that keeps the two abreast: the rover at 0.35-0.45 m/s and the drum
 at about the same, its side reading at 0.2-0.3 m for seconds, until the drum closes on the flank
-(the runner's ``crossing`` seeds 23, 45 and 58). So while the
-guard turns and the way ahead is clear (every front rangefinder the rover has, front and both
-front diagonals, reading beyond ``front_clear_m``), ``pass_speed_mps`` is a floor on the forward
-speed (never above the speed the rover was given): it draws ahead of what is at its side, a
-static obstacle or a moving one, instead of staying beside it. The autopilot raises both wheels
-by the same amount, so the turn is kept; not while a yield holds the rover back.
+(the runner's ``crossing`` seeds 23, 45 and 58). So while the guard turns and the way ahead is
+clear (every front rangefinder the rover has, front and both front diagonals, reading beyond
+``front_clear_m``), ``pass_speed_mps`` is a floor on the forward speed (never above the speed the
+rover was given): it draws ahead of what is at its side, a static obstacle or a moving one,
+instead of staying beside it. The autopilot raises both wheels by the same amount, so the turn is
+kept; not while a yield holds the rover back.
 """
 
 from __future__ import annotations
