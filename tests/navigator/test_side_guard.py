@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from rover_ctl.config import SideGuardParams
 from rover_ctl.navigation.side_guard import LEFT, RIGHT, pass_speed_mps, side_turn_radps
-from rover_ctl.vocabulary import RoverMode
+from rover_ctl.vocabulary import RoverMode, mav
 
 PARAMS = SideGuardParams()
 
@@ -60,7 +60,7 @@ def test_a_rover_driven_along_a_wall_too_close_is_bent_away_until_clear():
     assert math.degrees(math.pi / 2 - heading) == pytest.approx(18.3, abs=1.0)  # bent right, and no more
 
 
-FRONT, FRONT_LEFT, FRONT_RIGHT = 0, 7, 1
+FRONT, FRONT_LEFT, FRONT_RIGHT = mav.MAV_SENSOR_ROTATION_NONE, mav.MAV_SENSOR_ROTATION_YAW_315, mav.MAV_SENSOR_ROTATION_YAW_45
 
 
 def test_beside_something_with_the_way_ahead_clear_the_rover_keeps_its_passing_speed():
@@ -99,6 +99,6 @@ def test_the_autopilot_draws_ahead_of_a_flank_reading_only_with_the_way_ahead_cl
     slowed = _mean_speed_beside_a_close_left_reading(SideGuardParams(pass_speed_mps=0.0), math.inf)
     passing = _mean_speed_beside_a_close_left_reading(PARAMS, math.inf)
     blocked = _mean_speed_beside_a_close_left_reading(PARAMS, 1.0)
-    assert slowed < 0.6 * PARAMS.pass_speed_mps  # the rule base slows for the close reading
+    assert slowed < 0.6 * PARAMS.pass_speed_mps  # the rule base, turning back against the guard, slows to turn
     assert passing > 0.8 * PARAMS.pass_speed_mps
     assert blocked == pytest.approx(_mean_speed_beside_a_close_left_reading(SideGuardParams(pass_speed_mps=0.0), 1.0))
