@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -193,3 +194,26 @@ def test_just_after_stepping_aside_the_heading_limit_is_the_evaders():
     assert y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.0, heading_rad=off).speed_limit_mps is None
     late = Track(1, 3.5, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
     assert y.limit(0.0, 0.0, NORTH, 1.2, [late], 3.5, heading_rad=off).speed_limit_mps is not None
+
+
+def test_a_rover_pointing_off_its_course_drives_on_out_of_a_walkers_lane_rather_than_stopping_in_it():
+    """The rover points north, its target 40 degrees to the left (it is turning back to its
+    course); a walker 1.5 m to the left and 0.5 m ahead walks east, across the spot the rover
+    stands on. Going on along the course would walk the rover into it, but the rover goes where it
+    points: the speeds are tried along the heading, and full speed takes it out of the lane."""
+    course_rad = NORTH + math.radians(40.0)
+
+    def closest_and_slowest(heading_rad: float | None, dt_s: float = 0.05) -> tuple[float, float]:
+        y, north, closest, slowest = yielder(), 0.0, math.inf, math.inf
+        for k in range(int(6.0 / dt_s)):
+            t = k * dt_s
+            walker = Track(2, t, -1.5 + 0.5 * t, 0.5, 0.5, 0.0, hits=50, born_en=(-2.5, 0.5))
+            limit = y.limit(0.0, north, course_rad, 1.2, [walker], t, heading_rad=heading_rad).speed_limit_mps
+            speed = 1.2 if limit is None else limit
+            north, slowest = north + speed * dt_s, min(slowest, speed)
+            closest = min(closest, math.hypot(walker.east_m, walker.north_m - north))
+        return closest, slowest
+
+    assert closest_and_slowest(NORTH) == (pytest.approx(1.22, abs=0.01), 1.2)  # never slowed, kept 1.2 m
+    stopped_closest, stopped_slowest = closest_and_slowest(None)  # the course alone: it stops in the lane
+    assert stopped_slowest == 0.0 and stopped_closest < ROBOT_RADIUS_M + 0.2
