@@ -615,6 +615,10 @@ class EvadeParams:
     within this of it (m/s): the turning rover's beams slide over the walker."""
     side_free_m: float = 1.0
     """A side whose 45-degree rangefinder reads nearer than this is not stepped to (m)."""
+    front_free_m: float = 0.8
+    """No manoeuvre starts, and one under way ends, while the front rangefinder reads nearer than
+    this (m): something other than the walker is in the rover's way, which the rollouts do not
+    see, and the rule base is better at close quarters (0: off)."""
     max_s: float = 6.0
     """Longest manoeuvre (s)."""
     max_delta_deg: float = 90.0

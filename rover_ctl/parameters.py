@@ -417,6 +417,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("evasion.min_start_range_m", "EVD_MIN_RANGE", 0.0, 10.0, RW, {}),
     ("evasion.max_velocity_jump_mps", "EVD_MAX_VEL_JMP", 0.0, 10.0, RW, {}),
     ("evasion.side_free_m", "EVD_SIDE_FREE", 0.0, 10.0, RW, {}),
+    ("evasion.front_free_m", "EVD_FRONT_FREE", 0.0, 10.0, RW, {}),
     ("evasion.max_s", "EVD_MAX_TIME", 0.1, 120.0, RW, {}),
     ("evasion.max_delta_deg", "EVD_MAX_DELTA", 5.0, 120.0, RW, {"units": "deg"}),
     ("evasion.delta_step_deg", "EVD_DELTA_STEP", 5.0, 90.0, RW, {"units": "deg"}),

@@ -52,7 +52,10 @@ whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to 
 reads farther. The manoeuvre ends
 when the obstacle is behind the rover (``r . h < 0``, ``h`` its heading, and separating), when
 going straight along the course clears it by ``release_margin_m`` more than ``R``, or after
-``max_s``.
+``max_s``. It also ends, and none starts, while the front rangefinder reads nearer than
+``front_free_m``: the rollouts see only the walker, and the rover, stepping aside at full speed,
+drove into a second obstacle its front rangefinder had read closing from 0.66 m (the runner's
+``head_on`` seed 5); at close quarters the rule base drives.
 """
 
 from __future__ import annotations
@@ -64,9 +67,11 @@ from typing import Iterable, Mapping
 from rover_ctl.config import EvadeParams
 from rover_ctl.navigation.tracks import Track
 from rover_ctl.navigation.yielding import closest_approach_m
+from rover_ctl.vocabulary import mav
 
-FRONT_LEFT, FRONT_RIGHT = 7, 1
-"""MAV_SENSOR_ROTATION of the 45-degree rangefinders (``mav.MAV_SENSOR_ROTATION_YAW_315``/``_45``)."""
+FRONT = mav.MAV_SENSOR_ROTATION_NONE
+FRONT_LEFT, FRONT_RIGHT = mav.MAV_SENSOR_ROTATION_YAW_315, mav.MAV_SENSOR_ROTATION_YAW_45
+"""The 45-degree rangefinders."""
 
 
 @dataclass(frozen=True)
@@ -130,7 +135,8 @@ class Evader:
         re, rn = e - east_m, n - north_m
         behind = re * math.cos(heading_rad) + rn * math.sin(heading_rad) < 0.0 and re * track.v_east_mps + rn * track.v_north_mps > 0.0
         straight_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
-        if not start and (behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s):
+        blocked = ranges is not None and ranges.get(FRONT, math.inf) < p.front_free_m  # something else is in the way
+        if blocked or not start and (behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s):
             self._track = None
             return None
         def choose(side: float) -> tuple[float, float, float, float]:

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rover_ctl.config import EvadeParams
-from rover_ctl.navigation.evasion import FRONT_LEFT, FRONT_RIGHT, Evader
+from rover_ctl.navigation.evasion import FRONT, FRONT_LEFT, FRONT_RIGHT, Evader
 from rover_ctl.navigation.tracks import Track
 
 NORTH = math.pi / 2
@@ -105,6 +105,22 @@ def test_a_side_whose_diagonal_rangefinder_sees_something_near_is_not_stepped_to
     at, track = walker(0.0, 6.0, 0.0, -0.9)  # dead ahead: right, unless the right is blocked
     closest, sides, _ = drive(evader(), at, track, ranges={FRONT_RIGHT: 0.6, FRONT_LEFT: math.inf})
     assert sides[0] == 1 and closest >= HALF_WIDTH_M + 0.5
+
+
+def test_something_else_near_ahead_hands_the_rover_back_to_the_rule_base():
+    """The rollouts see only the walker: with a second obstacle read 0.6 m ahead no manoeuvre
+    starts, and one under way ends, so that the rover is not driven into it at full speed."""
+    _, track = walker(0.0, 6.0, 0.0, -0.9)
+    clear, blocked = {FRONT: math.inf}, {FRONT: 0.6}
+
+    def step(ev: Evader, t: float, ranges):
+        return ev.step(t, 0.0, 0.0, NORTH, CRUISE_MPS, NORTH, CRUISE_MPS, [track(t)], ranges)
+
+    assert step(evader(), 1.0, blocked) is None  # the walker 5.1 m ahead, closing at 2.1 m/s
+    assert step(evader(front_free_m=0.0), 1.0, blocked) is not None  # 0: off
+    ev = evader()
+    assert step(ev, 1.0, clear) is not None and step(ev, 1.04, blocked) is None
+    assert step(ev, 1.08, clear) is not None  # the way clear again, the walker still coming: it steps aside again
 
 
 def test_crossing_overtaken_and_standing_obstacles_are_not_stepped_aside_from():

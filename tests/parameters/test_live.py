@@ -248,7 +248,8 @@ def ex_yield_switch(d: Daemon) -> list:
 def ex_evasion(d: Daemon) -> list:
     """The rover drives north at 1.2 m/s (as the evader lets it) towards walkers coming head-on at
     several offsets and speeds: one whose velocity swings sideways mid-manoeuvre, one with the
-    right diagonal blocked, one met while slow, one at the edge of the track's maturity."""
+    right diagonal blocked, one met while slow, one at the edge of the track's maturity; in each,
+    something else read 0.5 m ahead for a moment."""
     from rover_ctl.navigation.tracks import Track
 
     evader, trace = d.autopilot.evader, []
@@ -264,7 +265,7 @@ def ex_evasion(d: Daemon) -> list:
             v_east = (0.3 * vn if offset > 0.5 else 0.0) + (-0.7 if swing and evader.active else 0.0)
             tracks = [Track(1, t, we, wn, v_east, vn, vv=vv, hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
             course = math.atan2(30.0 - y, -x)
-            out = evader.step(t, x, y, psi, v, course, 1.2, tracks, {1: 4.0 - blocked_right * 5, 7: 4.0}, may_start=k % 40 != 3)
+            out = evader.step(t, x, y, psi, v, course, 1.2, tracks, {0: 0.5 if k % 40 == 20 else 4.0, 1: 4.0 - blocked_right * 5, 7: 4.0}, may_start=k % 40 != 3)
             speed, omega = (1.2, 3.0 * math.remainder(course - psi, math.tau)) if out is None else (out.speed_mps, out.yaw_rate_radps)
             psi += omega * 0.05
             v += max(-0.05, min(0.05, speed - v))
