@@ -116,6 +116,9 @@ class Evader:
         if not p.enabled or speed_mps <= 0.0:
             self._track = None
             return None
+        if ranges is not None and ranges.get(FRONT, math.inf) < p.front_free_m:  # something else is in the way
+            self._track = None
+            return None
         live = {t.ident: t for t in tracks}
         radius_m = self._half_width_m() + p.margin_m
         ue, un = math.cos(course_rad), math.sin(course_rad)
@@ -135,8 +138,7 @@ class Evader:
         re, rn = e - east_m, n - north_m
         behind = re * math.cos(heading_rad) + rn * math.sin(heading_rad) < 0.0 and re * track.v_east_mps + rn * track.v_north_mps > 0.0
         straight_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
-        blocked = ranges is not None and ranges.get(FRONT, math.inf) < p.front_free_m  # something else is in the way
-        if blocked or not start and (behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s):
+        if not start and (behind or straight_m >= radius_m + p.release_margin_m or time_s - self._started_s > p.max_s):
             self._track = None
             return None
         def choose(side: float) -> tuple[float, float, float, float]:

@@ -23,9 +23,10 @@ is closest at
 and the rover is in conflict with the track when ``|d(tau*)| < R``, ``R = robot radius +
 margin_m`` (the track is an echo on the obstacle's near surface, so its own size is not added).
 Each track is checked with two velocities: ``w`` as estimated, and ``w - max(w . u, 0) u``, going
-straight across the course (without a heading, ``h`` is ``u``). A side beam's echo slides forward over a crosser's face as the rover
-drives past it, so the track's velocity along the course carries part of the rover's own (in the
-runner's ``crossing`` seed 33, 1.0 m/s along for a walker crossing at right angles): taken as
+straight across the course (without a heading, ``h`` is ``u``). A side beam's echo slides forward
+over a crosser's face as the rover drives past it, so the track's velocity along the course
+carries part of the rover's own (in the runner's ``crossing`` seed 33, 1.0 m/s along for a walker
+crossing at right angles): taken as
 estimated, the crosser would pass ahead of a stopped rover that is in fact standing in its lane.
 The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that is in
 conflict with no track under either velocity; ``None`` (no limit) when full speed is. When every
