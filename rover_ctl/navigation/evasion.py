@@ -66,12 +66,8 @@ from typing import Iterable, Mapping
 
 from rover_ctl.config import EvadeParams
 from rover_ctl.navigation.tracks import Track
+from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT
 from rover_ctl.navigation.yielding import closest_approach_m
-from rover_ctl.vocabulary import mav
-
-FRONT = mav.MAV_SENSOR_ROTATION_NONE
-FRONT_LEFT, FRONT_RIGHT = mav.MAV_SENSOR_ROTATION_YAW_315, mav.MAV_SENSOR_ROTATION_YAW_45
-"""The 45-degree rangefinders."""
 
 
 @dataclass(frozen=True)

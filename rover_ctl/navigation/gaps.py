@@ -123,12 +123,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rover_ctl.config import PassageParams
+from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
 
 EN = tuple[float, float]
 
-SIDE_BODY_RAD = {2: -math.pi / 2.0, 6: math.pi / 2.0}
-"""The side rangefinders (MAV_SENSOR_ORIENTATION yaw 90 and 270): body angle, counter-clockwise."""
-FRONT = 0
+SIDE_BODY_RAD = {RIGHT: -math.pi / 2.0, LEFT: math.pi / 2.0}
+"""The side rangefinders: body angle, counter-clockwise."""
 WALL_MIN_ECHOES = 5
 """A side beam's echoes in a row that make a wall worth looking along (a quarter of a second)."""
 WALL_MIN_SPAN_M = 0.6
@@ -143,8 +143,7 @@ Less, and more than ``heading_tol_deg``: the gap's axis is turned onto the norma
 wall line's fit from the sweep was off by 4-6 degrees in narrow_gap worlds 9, 24 and 36)."""
 SQUARINGS = 3
 """Looking: the gap's axis is turned onto the measured normal at most this many times."""
-DIAGONALS = (7, 1)
-"""Front-left and front-right (MAV_SENSOR_ORIENTATION yaw 315 and 45)."""
+DIAGONALS = (FRONT_LEFT, FRONT_RIGHT)
 RETREAT_M = 0.4
 """A scan found the rover off the opening's centre line: it reverses to this far (m) behind the
 line-up point on the measured line and drives forwards to it again, closing the lateral error

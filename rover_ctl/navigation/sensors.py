@@ -28,9 +28,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
+from rover_ctl.vocabulary import mav
+
 ORIENTATION_NAMES = {0: "front", 1: "front_right", 2: "right", 3: "back_right", 4: "back", 5: "back_left", 6: "left", 7: "front_left"}
 """MAV_SENSOR_ORIENTATION yaw steps (45 deg clockwise each) as the rule bases name them."""
-DIAGONAL_NEIGHBOURS = {1: (0, 2), 7: (0, 6)}
+FRONT, FRONT_RIGHT, RIGHT = mav.MAV_SENSOR_ROTATION_NONE, mav.MAV_SENSOR_ROTATION_YAW_45, mav.MAV_SENSOR_ROTATION_YAW_90
+LEFT, FRONT_LEFT = mav.MAV_SENSOR_ROTATION_YAW_270, mav.MAV_SENSOR_ROTATION_YAW_315
+"""The orientations the navigation modules read by name (the guards, the evader, passages)."""
+DIAGONAL_NEIGHBOURS = {FRONT_RIGHT: (FRONT, RIGHT), FRONT_LEFT: (FRONT, LEFT)}
 """A missing diagonal is read from the nearer of these two (front and its side)."""
 HORIZONTAL = frozenset(ORIENTATION_NAMES)
 """Orientations that can see an obstacle on the ground (25 down, 24 up and the rest are ignored)."""

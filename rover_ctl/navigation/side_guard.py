@@ -46,10 +46,9 @@ from __future__ import annotations
 from typing import Mapping
 
 from rover_ctl.config import SideGuardParams
-from rover_ctl.vocabulary import mav
+from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
 
-LEFT, RIGHT = mav.MAV_SENSOR_ROTATION_YAW_270, mav.MAV_SENSOR_ROTATION_YAW_90
-AHEAD = (mav.MAV_SENSOR_ROTATION_NONE, mav.MAV_SENSOR_ROTATION_YAW_45, mav.MAV_SENSOR_ROTATION_YAW_315)
+AHEAD = (FRONT, FRONT_RIGHT, FRONT_LEFT)
 """The front rangefinder and the two front diagonals: the way ahead."""
 
 

@@ -9,8 +9,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from rover_ctl.config import SideGuardParams
-from rover_ctl.navigation.side_guard import LEFT, RIGHT, pass_speed_mps, side_turn_radps
-from rover_ctl.vocabulary import RoverMode, mav
+from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
+from rover_ctl.navigation.side_guard import pass_speed_mps, side_turn_radps
+from rover_ctl.vocabulary import RoverMode
 
 PARAMS = SideGuardParams()
 
@@ -58,9 +59,6 @@ def test_a_rover_driven_along_a_wall_too_close_is_bent_away_until_clear():
         x, y = x + math.cos(heading) * 0.04, y + math.sin(heading) * 0.04
     assert x - half_width_m - wall_x >= PARAMS.range_m - 0.05  # clear of the guard's range, about
     assert math.degrees(math.pi / 2 - heading) == pytest.approx(18.3, abs=1.0)  # bent right, and no more
-
-
-FRONT, FRONT_LEFT, FRONT_RIGHT = mav.MAV_SENSOR_ROTATION_NONE, mav.MAV_SENSOR_ROTATION_YAW_315, mav.MAV_SENSOR_ROTATION_YAW_45
 
 
 def test_beside_something_with_the_way_ahead_clear_the_rover_keeps_its_passing_speed():
