@@ -178,7 +178,13 @@ class WheelController:
         return self.meter.time_s is not None and time_s - self.meter.time_s <= self.params.measurement_timeout_s
 
     def step(self, time_s: float, dt_s: float, left_rpm: float, right_rpm: float) -> WheelCommand:
-        """One control step at vehicle time ``time_s`` lasting ``dt_s``."""
+        """One control step at vehicle time ``time_s`` lasting ``dt_s``. A stop (both setpoints
+        zero) is a ``brake``, then neutral: the PI loop on the late filtered speed winds its
+        integrators backwards while the wheels slow down, and after a stop from 1.2 m/s it drove
+        them in reverse at 0.17 m/s for over half a second (a rover yielding to a walker ahead
+        backed into one passing behind it: the runner's ``crossing`` seed 155)."""
+        if left_rpm == 0.0 and right_rpm == 0.0:
+            return self.brake(time_s, dt_s) or self.neutral()
         fresh = self._fresh(time_s)
         left = self._left.step(left_rpm, self.meter.left_rpm if fresh else None, dt_s)
         right = self._right.step(right_rpm, self.meter.right_rpm if fresh else None, dt_s)

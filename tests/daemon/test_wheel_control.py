@@ -108,11 +108,13 @@ def test_stale_measurements_fall_back_to_feed_forward():
     assert controller.neutral().throttle_us == P.rc_trim_us
 
 
-def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[float, float] = (160.0, 160.0)) -> list[tuple[float, float]]:
+def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[float, float] = (160.0, 160.0),
+                     by_setpoint: bool = False) -> list[tuple[float, float]]:  # fmt: skip
     """The emulator's drive train (its DC motors, mixer and body) driven at ``setpoints_rpm`` for
     4 s (160 rpm: 1.2 m/s), then the brake at 25 Hz with wheel readings at ``reading_hz``, the first
-    control step ``phase_s`` after a reading; neutral once the brake lets go. Returns the left and
-    right wheel rim speeds (m/s) every 10 ms from the moment the brake starts."""
+    control step ``phase_s`` after a reading; neutral once the brake lets go. ``by_setpoint``: the
+    stop asked as zero setpoints to ``step`` (a navigator told to stand) instead. Returns the left
+    and right wheel rim speeds (m/s) every 10 ms from the moment the brake starts."""
     physics = pytest.importorskip("sitl.physics")
     params = pytest.importorskip("sitl.params")
     mixer = pytest.importorskip("sitl.mixer")
@@ -135,6 +137,8 @@ def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[flo
             braking = braking or t_ms >= 4000
             if not braking:
                 apply(controller.step(t_s, step_ms / 1000, *setpoints_rpm))
+            elif by_setpoint:
+                apply(controller.step(t_s, step_ms / 1000, 0.0, 0.0))
             else:
                 apply(controller.brake(t_s, step_ms / 1000) or controller.neutral())
         if braking and t_ms % 10 == 0:
@@ -146,8 +150,9 @@ def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[flo
 @pytest.mark.parametrize("reading_hz", [25.0, 50.0])
 @pytest.mark.parametrize("phase_s", [0.0, 0.01, 0.02, 0.03])
 @pytest.mark.parametrize("setpoints_rpm", [(160.0, 160.0), (120.0, -120.0)], ids=["straight", "pivot"])
-def test_the_brake_stops_the_wheels_without_driving_them_backwards(reading_hz, phase_s, setpoints_rpm):
-    speeds = stop_from_cruise(reading_hz, phase_s, setpoints_rpm)
+@pytest.mark.parametrize("by_setpoint", [False, True], ids=["brake", "zero-setpoints"])
+def test_the_brake_stops_the_wheels_without_driving_them_backwards(reading_hz, phase_s, setpoints_rpm, by_setpoint):
+    speeds = stop_from_cruise(reading_hz, phase_s, setpoints_rpm, by_setpoint)
     for wheel, setpoint in enumerate(setpoints_rpm):
         direction = math.copysign(1.0, setpoint)
         along = [direction * v[wheel] for v in speeds]  # positive: the way the wheel was turning
