@@ -60,7 +60,7 @@ from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.side_guard import pass_speed_mps, side_turn_radps
-from rover_ctl.navigation.yielding import Yielder
+from rover_ctl.navigation.yielding import Yielder, keep_line
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
@@ -598,6 +598,8 @@ class Autopilot:
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip
         left, right = nav.left_rpm, nav.right_rpm
+        if yielding:  # not turning the way the crosser walks
+            left, right = keep_line(left, right, yielded)
         side_turn = side_turn_radps(ranges, self.config.side_guard)  # something at a flank: turn away from it
         if side_turn:
             floor_mps = None if yielding else pass_speed_mps(ranges, speed_mps, self.config.side_guard)

@@ -7,7 +7,9 @@ obstacle tracks (``rover_ctl.navigation.tracks``), and caps the navigator's spee
 as an obstacle on the left and the rover turns right, which is where a crossing obstacle is going.
 A driver does the opposite: keeps the line and lets it pass. This is the path-velocity
 decomposition of Kant and Zucker (1986): the path is the planner's and the navigator's, and only
-the speed along it is chosen so as to miss the moving obstacles.
+the speed along it is chosen so as to miss the moving obstacles. While the rover yields, a turn
+the navigator makes the way the crosser walks is taken out (``keep_line``): it kept the rover
+alongside the crosser.
 
 **Method.** The rover at ``p`` is taken to go on along the unit vector ``h`` where it points, at
 a fraction ``s`` of the speed it was given, ``V``; a track at ``q`` with velocity ``w`` goes on at
@@ -22,17 +24,23 @@ is closest at
 
 and the rover is in conflict with the track when ``|d(tau*)| < R``, ``R = robot radius +
 margin_m`` (the track is an echo on the obstacle's near surface, so its own size is not added).
-Each track is checked with two velocities: ``w`` as estimated, and ``w - max(w . u, 0) u``, going
-straight across the course (without a heading, ``h`` is ``u``). A side beam's echo slides forward
-over a crosser's face as the rover drives past it, so the track's velocity along the course
-carries part of the rover's own (in the runner's ``crossing`` seed 33, 1.0 m/s along for a walker
-crossing at right angles): taken as
-estimated, the crosser would pass ahead of a stopped rover that is in fact standing in its lane.
-The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that is in
-conflict with no track under either velocity; ``None`` (no limit) when full speed is. When every
-fraction is in conflict (an obstacle whose course would reach even a stopped rover), the fraction
-whose least ``|d(tau*)| - R`` over tracks and velocities is largest: full speed only when that
-is the one (passing ahead of it), never by default.
+Each track is checked with two velocities: ``w`` as estimated, and ``w - (w . u) u``, going
+straight across the course (without a heading, ``h`` is ``u``). A rangefinder's echo slides over a
+crosser's face, so the track's velocity along the course is not to be trusted either way. Forward:
+a side beam's echo slides along as the rover drives past (in the runner's ``crossing`` seed 33,
+1.0 m/s along for a walker crossing at right angles), and taken as estimated the crosser would
+pass ahead of a stopped rover that in fact stands in its lane. Back towards the rover: a walker
+crossing a diagonal beam slides down it (seed 118: 0.3 m/s towards a stopped rover for one
+walking straight across 1.1 m ahead of it), and taken as estimated it would walk into the stopped
+rover. The limit is ``s V`` for the largest ``s`` in 1, (k-1)/k, ... 0 (``k = speed_steps``) that
+is in conflict with no track under either velocity; ``None`` (no limit) when full speed is. When
+every fraction is in conflict (an obstacle whose course would reach even a stopped rover), the
+fraction whose least ``|d(tau*)| - R`` over tracks going straight across is largest: full speed
+only when that is the one (passing ahead of it), never by default. (Ranked on the worse of both
+velocities, the walker of seed 118 ranked full speed ahead of it above stopping, 0.53 m against
+0.23 m; the rover drove on, the rule base turned it away from the walker, which is the way the
+walker went, and it struck the rover's flank. That ranking, with ``keep_line`` below, took the
+runner's failures of seeds 1-500 of ``crossing`` from 31 to 13.)
 
 Only tracks that *cross* are yielded to: the component of ``w`` across ``u`` of at least
 ``min_cross_mps`` and at least ``sin(min_cross_deg)`` of its speed (a track's velocity is noisy: a
@@ -84,6 +92,8 @@ class YieldDecision:
 
     speed_limit_mps: float | None
     track_ident: int | None = None
+    across_mps: float = 0.0
+    """The velocity of that track across the rover's heading (m/s, positive: to the rover's left)."""
 
 
 def closest_approach_m(r_east: float, r_north: float, v_east: float, v_north: float, horizon_s: float) -> float:
@@ -91,6 +101,17 @@ def closest_approach_m(r_east: float, r_north: float, v_east: float, v_north: fl
     vv = v_east * v_east + v_north * v_north
     tau = 0.0 if vv <= 1e-12 else min(max(-(r_east * v_east + r_north * v_north) / vv, 0.0), horizon_s)
     return math.hypot(r_east + v_east * tau, r_north + v_north * tau)
+
+
+def keep_line(left_rpm: float, right_rpm: float, decision: YieldDecision) -> tuple[float, float]:
+    """The navigator's wheel setpoints while yielding: a turn the way the obstacle yielded to walks
+    across is taken out (both wheels at their mean), so the rover keeps its line and lets it pass.
+    The rule base turns away from where an obstacle is, which for a crosser is where it goes: the
+    rover ran alongside it, and it struck the rover's flank (module docstring)."""
+    if decision.speed_limit_mps is not None and decision.across_mps * (right_rpm - left_rpm) > 0.0:
+        mean_rpm = (left_rpm + right_rpm) / 2.0
+        return mean_rpm, mean_rpm
+    return left_rpm, right_rpm
 
 
 class Yielder:
@@ -133,6 +154,7 @@ class Yielder:
         off_limit_deg = p.after_evasion_heading_off_deg if time_s - self._evaded_s < p.after_evasion_s else p.max_heading_off_deg
         off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(off_limit_deg)
         half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
+        he, hn = (ue, un) if heading_rad is None else (math.cos(heading_rad), math.sin(heading_rad))
         crossing = []
         for ident, track in candidates.items():
             e, n = track.position_at(time_s)
@@ -143,24 +165,22 @@ class Yielder:
             elif (off_course or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
                   or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
                 continue
-            along_mps = max(track.v_east_mps * ue + track.v_north_mps * un, 0.0)  # forward along the course: maybe the echo sliding
-            crossing.append((ident, e - east_m, n - north_m, ((track.v_east_mps, track.v_north_mps),
-                                                              (track.v_east_mps - along_mps * ue, track.v_north_mps - along_mps * un))))
+            along_mps = track.v_east_mps * ue + track.v_north_mps * un  # either way: maybe the echo sliding
+            crossing.append((ident, e - east_m, n - north_m, ((track.v_east_mps - along_mps * ue, track.v_north_mps - along_mps * un),
+                                                              (track.v_east_mps, track.v_north_mps))))
         if not crossing:
             self._yielding = {}
             return YieldDecision(None)
-        if heading_rad is not None:  # the speeds are tried where the rover points: where it goes next
-            ue, un = math.cos(heading_rad), math.sin(heading_rad)
+        ue, un = he, hn  # the speeds are tried where the rover points: where it goes next
         steps = max(int(p.speed_steps), 1)
         best_fraction, best_m = 1.0, -math.inf
         for fraction in (i / steps for i in range(steps, -1, -1)):
             vr_e, vr_n = fraction * speed_mps * ue, fraction * speed_mps * un
-            worst_m, free = math.inf, True  # the closest any crossing track comes, less the margin it needs
+            worst_m, free = math.inf, True  # the closest any track comes straight across, less the margin it needs
             for ident, re, rn, velocities in crossing:
                 release_m = p.release_margin_m if ident in self._yielding and fraction == 1.0 else 0.0
-                for we, wn in velocities:
-                    clear_m = closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - radius_m
-                    worst_m, free = min(worst_m, clear_m), free and clear_m >= release_m
+                across_m, estimated_m = (closest_approach_m(re, rn, we - vr_e, wn - vr_n, p.horizon_s) - radius_m for we, wn in velocities)
+                worst_m, free = min(worst_m, across_m), free and min(across_m, estimated_m) >= release_m
             if free:
                 best_fraction = fraction
                 break
@@ -171,7 +191,9 @@ class Yielder:
             return YieldDecision(None)
         conflicts = [c for c in crossing if self._conflicts(c, speed_mps, ue, un, radius_m)] or crossing
         self._yielding = {c[0]: candidates[c[0]].snapshot() for c in conflicts}
-        return YieldDecision(best_fraction * speed_mps, min(self._yielding))
+        ident = min(self._yielding)
+        track = self._yielding[ident]
+        return YieldDecision(best_fraction * speed_mps, ident, track.v_north_mps * ue - track.v_east_mps * un)
 
     def _conflicts(self, track: tuple, speed_mps: float, ue: float, un: float, radius_m: float) -> bool:
         """Whether the track is in conflict with the rover at full speed (one it is yielding to)."""

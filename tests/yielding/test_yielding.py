@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from rover_ctl.config import YieldParams
 from rover_ctl.navigation.tracks import Track
-from rover_ctl.navigation.yielding import Yielder, closest_approach_m
+from rover_ctl.navigation.yielding import YieldDecision, Yielder, closest_approach_m, keep_line
 
 NORTH = math.pi / 2
 ROBOT_RADIUS_M = 0.3
@@ -198,22 +198,41 @@ def test_just_after_stepping_aside_the_heading_limit_is_the_evaders():
 
 def test_a_rover_pointing_off_its_course_drives_on_out_of_a_walkers_lane_rather_than_stopping_in_it():
     """The rover points north, its target 40 degrees to the left (it is turning back to its
-    course); a walker 1.5 m to the left and 0.5 m ahead walks east, across the spot the rover
-    stands on. Going on along the course would walk the rover into it, but the rover goes where it
-    points: the speeds are tried along the heading, and full speed takes it out of the lane."""
+    course); a walker 1.5 m to the left walks east, across the spot the rover stands on. Going on
+    along the course would walk the rover into it, but the rover goes where it points: the speeds
+    are tried along the heading, and full speed takes it out of the lane."""
     course_rad = NORTH + math.radians(40.0)
 
     def closest_and_slowest(heading_rad: float | None, dt_s: float = 0.05) -> tuple[float, float]:
         y, north, closest, slowest = yielder(), 0.0, math.inf, math.inf
         for k in range(int(6.0 / dt_s)):
             t = k * dt_s
-            walker = Track(2, t, -1.5 + 0.5 * t, 0.5, 0.5, 0.0, hits=50, born_en=(-2.5, 0.5))
+            walker = Track(2, t, -1.5 + 0.5 * t, 0.0, 0.5, 0.0, hits=50, born_en=(-2.5, 0.0))
             limit = y.limit(0.0, north, course_rad, 1.2, [walker], t, heading_rad=heading_rad).speed_limit_mps
             speed = 1.2 if limit is None else limit
             north, slowest = north + speed * dt_s, min(slowest, speed)
             closest = min(closest, math.hypot(walker.east_m, walker.north_m - north))
         return closest, slowest
 
-    assert closest_and_slowest(NORTH) == (pytest.approx(1.22, abs=0.01), 1.2)  # never slowed, kept 1.2 m
+    assert closest_and_slowest(NORTH) == (pytest.approx(1.41, abs=0.01), 1.2)  # never slowed, kept 1.4 m
     stopped_closest, stopped_slowest = closest_and_slowest(None)  # the course alone: it stops in the lane
     assert stopped_slowest == 0.0 and stopped_closest < ROBOT_RADIUS_M + 0.2
+
+
+def test_a_walker_sliding_down_a_diagonal_beam_is_waited_for_not_raced():
+    """The runner's ``crossing`` seed 118: a walker 0.74 m ahead and 0.8 m to the right walks
+    across to the left; its echo slides down the front-right beam, so its track also comes back at
+    the rover at 0.29 m/s. Taken as estimated, even a stopped rover is walked into and racing ahead
+    of it ranked best; going straight across, it passes ahead of a stopped rover, which stops."""
+    walker = Track(1, 0.0, 0.80, 0.74, -0.49, -0.29, hits=72, born_en=(2.5, 0.5))
+    decision = yielder().limit(0.0, 0.0, NORTH, 1.2, [walker], 0.0, heading_rad=NORTH)
+    assert decision.speed_limit_mps == 0.0 and decision.track_ident == 1
+    assert decision.across_mps == pytest.approx(0.49)  # it walks to the rover's left
+
+
+def test_while_yielding_the_rover_does_not_turn_the_way_the_crosser_walks():
+    walks_left = YieldDecision(0.3, 1, across_mps=0.5)
+    assert keep_line(20.0, 40.0, walks_left) == (30.0, 30.0)  # a left turn, after it: taken out
+    assert keep_line(40.0, 20.0, walks_left) == (40.0, 20.0)  # a right turn, behind it: kept
+    assert keep_line(40.0, 20.0, YieldDecision(0.3, 1, across_mps=-0.5)) == (30.0, 30.0)
+    assert keep_line(20.0, 40.0, YieldDecision(None)) == (20.0, 40.0)  # not yielding: untouched
