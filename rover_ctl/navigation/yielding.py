@@ -154,7 +154,6 @@ class Yielder:
         off_limit_deg = p.after_evasion_heading_off_deg if time_s - self._evaded_s < p.after_evasion_s else p.max_heading_off_deg
         off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(off_limit_deg)
         half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
-        he, hn = (ue, un) if heading_rad is None else (math.cos(heading_rad), math.sin(heading_rad))
         crossing = []
         for ident, track in candidates.items():
             e, n = track.position_at(time_s)
@@ -171,7 +170,8 @@ class Yielder:
         if not crossing:
             self._yielding = {}
             return YieldDecision(None)
-        ue, un = he, hn  # the speeds are tried where the rover points: where it goes next
+        if heading_rad is not None:  # the speeds are tried where the rover points: where it goes next
+            ue, un = math.cos(heading_rad), math.sin(heading_rad)
         steps = max(int(p.speed_steps), 1)
         best_fraction, best_m = 1.0, -math.inf
         for fraction in (i / steps for i in range(steps, -1, -1)):
