@@ -8,8 +8,8 @@ as an obstacle on the left and the rover turns right, which is where a crossing 
 A driver does the opposite: keeps the line and lets it pass. This is the path-velocity
 decomposition of Kant and Zucker (1986): the path is the planner's and the navigator's, and only
 the speed along it is chosen so as to miss the moving obstacles. While the rover yields, a turn
-the navigator makes the way the crosser walks is taken out (``keep_line``): it kept the rover
-alongside the crosser.
+the navigator makes the way the crosser walks is taken out (``keep_line``): that turn kept the
+rover alongside the crosser.
 
 **Method.** The rover at ``p`` is taken to go on along the unit vector ``h`` where it points, at
 a fraction ``s`` of the speed it was given, ``V``; a track at ``q`` with velocity ``w`` goes on at
@@ -107,7 +107,10 @@ def keep_line(left_rpm: float, right_rpm: float, decision: YieldDecision) -> tup
     """The navigator's wheel setpoints while yielding: a turn the way the obstacle yielded to walks
     across is taken out (both wheels at their mean), so the rover keeps its line and lets it pass.
     The rule base turns away from where an obstacle is, which for a crosser is where it goes: the
-    rover ran alongside it, and it struck the rover's flank (module docstring)."""
+    rover ran alongside it, and it struck the rover's flank (module docstring). Its cost, not yet
+    paid off: a false yield to a static drum's track in clutter also loses the turn that clears
+    the drum (the runner's ``dense_clutter``, seeds 1-200: 190 pass with it, 198 without;
+    docs/perception.md)."""
     if decision.speed_limit_mps is not None and decision.across_mps * (right_rpm - left_rpm) > 0.0:
         mean_rpm = (left_rpm + right_rpm) / 2.0
         return mean_rpm, mean_rpm
