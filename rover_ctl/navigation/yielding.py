@@ -105,15 +105,18 @@ def closest_approach_m(r_east: float, r_north: float, v_east: float, v_north: fl
 
 def keep_line(left_rpm: float, right_rpm: float, decision: YieldDecision) -> tuple[float, float]:
     """The navigator's wheel setpoints while yielding: a turn the way the obstacle yielded to walks
-    across is taken out (both wheels at their mean), so the rover keeps its line and lets it pass.
-    The rule base turns away from where an obstacle is, which for a crosser is where it goes: the
-    rover ran alongside it, and it struck the rover's flank (module docstring). Its cost, not yet
-    paid off: a false yield to a static drum's track in clutter also loses the turn that clears
-    the drum (the runner's ``dense_clutter``, seeds 1-200: 190 pass with it, 198 without;
-    docs/perception.md)."""
+    across is taken out, so the rover keeps its line and lets it pass. The rule base turns away
+    from where an obstacle is, which for a crosser is where it goes: the rover ran alongside it,
+    and it struck the rover's flank (module docstring).
+
+    Both wheels go at the slower wheel's setpoint (never below zero): the turn's forward speed on
+    its inside. Not at their mean: a yield is sometimes to a false track of a static drum, and the
+    turn then clears the drum; the mean drove a hard turn (100 and 0 rpm) straight on at half speed
+    into it (the runner's ``dense_clutter``, seeds 1-200: 190 pass with the mean, 197 with the
+    slower wheel, 198 with no ``keep_line``; docs/perception.md)."""
     if decision.speed_limit_mps is not None and decision.across_mps * (right_rpm - left_rpm) > 0.0:
-        mean_rpm = (left_rpm + right_rpm) / 2.0
-        return mean_rpm, mean_rpm
+        inside_rpm = max(min(left_rpm, right_rpm), 0.0)
+        return inside_rpm, inside_rpm
     return left_rpm, right_rpm
 
 

@@ -232,7 +232,15 @@ def test_a_walker_sliding_down_a_diagonal_beam_is_waited_for_not_raced():
 
 def test_while_yielding_the_rover_does_not_turn_the_way_the_crosser_walks():
     walks_left = YieldDecision(0.3, 1, across_mps=0.5)
-    assert keep_line(20.0, 40.0, walks_left) == (30.0, 30.0)  # a left turn, after it: taken out
+    assert keep_line(20.0, 40.0, walks_left) == (20.0, 20.0)  # a left turn, after it: taken out
     assert keep_line(40.0, 20.0, walks_left) == (40.0, 20.0)  # a right turn, behind it: kept
-    assert keep_line(40.0, 20.0, YieldDecision(0.3, 1, across_mps=-0.5)) == (30.0, 30.0)
+    assert keep_line(40.0, 20.0, YieldDecision(0.3, 1, across_mps=-0.5)) == (20.0, 20.0)
     assert keep_line(20.0, 40.0, YieldDecision(None)) == (20.0, 40.0)  # not yielding: untouched
+
+
+def test_a_turn_taken_out_never_drives_on_faster_than_its_inside_wheel():
+    """A hard turn away from something close (here a static drum a false track stands on) must not
+    become a straight drive at half speed into it (runner dense_clutter seed 56)."""
+    walks_right = YieldDecision(0.9, 22, across_mps=-0.25)
+    assert keep_line(100.0, 0.0, walks_right) == (0.0, 0.0)
+    assert keep_line(60.0, -10.0, walks_right) == (0.0, 0.0)  # a spin: no wheel goes backwards
