@@ -302,6 +302,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("wheel_control.kp", "WHL_P", 0.0, 1.0, RW, {"units": "1/rpm"}),
     ("wheel_control.ki", "WHL_I", 0.0, 1.0, RW, {"units": "1/(rpm s)"}),
     ("wheel_control.integral_limit", "WHL_IMAX", 0.0, 1.0, RW, {}),
+    ("wheel_control.integrate_max_rate_rpm_s", "WHL_I_MAXRATE", 0.0, 100000.0, RW, {"units": "rpm/s"}),
     ("wheel_control.speed_filter_tau_s", "WHL_FILT_TAU", 0.0, 5.0, RW, {}),
     ("wheel_control.measurement_timeout_s", "WHL_MEAS_TIMEOUT", 0.01, 10.0, RW, {}),
     ("wheel_control.brake_release_rpm", "WHL_BRAKE_REL", 0.0, 100.0, RW, {"units": "rpm"}),

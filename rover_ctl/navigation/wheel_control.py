@@ -13,7 +13,10 @@ Pure (no I/O, no clock: the caller passes the vehicle-time step). Three pieces:
 ``WheelController``
     per wheel a PI loop with feed-forward on the motor output ``u`` in [-1, 1]:
     ``u = rpm_set / full_output_rpm + kp e + I``, ``I += ki e dt`` only while that does not push a
-    saturated output further (conditional-integration anti-windup), ``|I| <= integral_limit``.
+    saturated output further and while the filtered speed changes slower than
+    ``integrate_max_rate_rpm_s`` (conditional-integration anti-windup: in a speed change the error
+    is the drive train's lag, and integrating it made a slow-down to a crawl overshoot into
+    reverse), ``|I| <= integral_limit``.
     Without a fresh measurement it runs on feed-forward alone. ``brake`` stops the wheels: the
     same loop with a zero setpoint on the lag-corrected speeds, each wheel let go (output 0, its
     integrator cleared) once its speed is below ``brake_release_rpm`` or past zero. On the
@@ -140,7 +143,9 @@ class _PiWheel:
         self.params = params
         self.integral = 0.0
 
-    def step(self, setpoint_rpm: float, measured_rpm: float | None, dt_s: float) -> float:
+    def step(self, setpoint_rpm: float, measured_rpm: float | None, dt_s: float, rate_rpm_s: float = 0.0) -> float:
+        """Motor output for ``setpoint_rpm``; ``measured_rpm`` the filtered speed (None: feed-forward
+        alone), ``rate_rpm_s`` its rate of change."""
         p = self.params
         feed_forward = setpoint_rpm / p.full_output_rpm
         if measured_rpm is None:
@@ -148,7 +153,7 @@ class _PiWheel:
         error = setpoint_rpm - measured_rpm
         unclamped = feed_forward + p.kp * error + self.integral
         saturated_same_way = abs(unclamped) >= 1.0 and math.copysign(1.0, unclamped) == math.copysign(1.0, error)
-        if not saturated_same_way:
+        if not saturated_same_way and abs(rate_rpm_s) <= p.integrate_max_rate_rpm_s:
             self.integral = max(-p.integral_limit, min(p.integral_limit, self.integral + p.ki * error * dt_s))
         return max(-1.0, min(1.0, feed_forward + p.kp * error + self.integral))
 
@@ -186,8 +191,9 @@ class WheelController:
         if left_rpm == 0.0 and right_rpm == 0.0:
             return self.brake(time_s, dt_s) or self.neutral()
         fresh = self._fresh(time_s)
-        left = self._left.step(left_rpm, self.meter.left_rpm if fresh else None, dt_s)
-        right = self._right.step(right_rpm, self.meter.right_rpm if fresh else None, dt_s)
+        meter = self.meter
+        left = self._left.step(left_rpm, meter.left_rpm if fresh else None, dt_s, meter.left_rate_rpm_s)
+        right = self._right.step(right_rpm, meter.right_rpm if fresh else None, dt_s, meter.right_rate_rpm_s)
         steering_us, throttle_us = motors_to_rc(left, right, self.params)
         return WheelCommand(steering_us, throttle_us, left, right)
 

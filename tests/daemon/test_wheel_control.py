@@ -109,12 +109,13 @@ def test_stale_measurements_fall_back_to_feed_forward():
 
 
 def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[float, float] = (160.0, 160.0),
-                     by_setpoint: bool = False) -> list[tuple[float, float]]:  # fmt: skip
+                     by_setpoint: bool = False, then_rpm: tuple[float, float] | None = None) -> list[tuple[float, float]]:  # fmt: skip
     """The emulator's drive train (its DC motors, mixer and body) driven at ``setpoints_rpm`` for
     4 s (160 rpm: 1.2 m/s), then the brake at 25 Hz with wheel readings at ``reading_hz``, the first
     control step ``phase_s`` after a reading; neutral once the brake lets go. ``by_setpoint``: the
-    stop asked as zero setpoints to ``step`` (a navigator told to stand) instead. Returns the left
-    and right wheel rim speeds (m/s) every 10 ms from the moment the brake starts."""
+    stop asked as zero setpoints to ``step`` (a navigator told to stand) instead; ``then_rpm``: no
+    stop, these setpoints instead. Returns the left and right wheel rim speeds (m/s) every 10 ms
+    from the moment the brake (or the new setpoints) starts."""
     physics = pytest.importorskip("sitl.physics")
     params = pytest.importorskip("sitl.params")
     mixer = pytest.importorskip("sitl.mixer")
@@ -137,6 +138,8 @@ def stop_from_cruise(reading_hz: float, phase_s: float, setpoints_rpm: tuple[flo
             braking = braking or t_ms >= 4000
             if not braking:
                 apply(controller.step(t_s, step_ms / 1000, *setpoints_rpm))
+            elif then_rpm is not None:
+                apply(controller.step(t_s, step_ms / 1000, *then_rpm))
             elif by_setpoint:
                 apply(controller.step(t_s, step_ms / 1000, 0.0, 0.0))
             else:
@@ -159,6 +162,21 @@ def test_the_brake_stops_the_wheels_without_driving_them_backwards(reading_hz, p
         assert along[0] > 0.8
         assert min(along) > -0.02  # never pushed through the stop into reverse
         assert max(abs(v) for v in along[50:]) < 0.03  # standing half a second after the brake
+
+
+@pytest.mark.parametrize("reading_hz", [25.0, 50.0])
+@pytest.mark.parametrize("phase_s", [0.0, 0.02])
+@pytest.mark.parametrize("crawl_rpm, least_mps, settle_share", [(40.0, 0.22, 0.1), (10.0, -0.01, 0.3)])
+def test_slowing_to_a_crawl_does_not_wind_the_integrator_into_reverse(reading_hz, phase_s, crawl_rpm, least_mps, settle_share):
+    """From 1.2 m/s to a crawl (a yield): the error while the drive train slows is its own lag.
+    Integrated, it drove the wheels backwards at up to 0.135 m/s when slowing to 10 rpm (0.073 m/s),
+    and down to 0.12 m/s for over a second when slowing to 40 rpm (0.293 m/s)."""
+    speeds = stop_from_cruise(reading_hz, phase_s, then_rpm=(crawl_rpm, crawl_rpm))
+    crawl_mps = crawl_rpm * 2.0 * math.pi * RADIUS_M / 60.0
+    left = [v[0] for v in speeds]
+    assert left[0] > 0.8
+    assert min(left) > least_mps
+    assert abs(left[-1] - crawl_mps) < settle_share * crawl_mps  # two seconds later
 
 
 def test_without_fresh_wheel_readings_the_brake_leaves_the_stop_to_neutral():
