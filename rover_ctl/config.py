@@ -389,12 +389,13 @@ class WheelControlParams:
     """Bound on the integral term's share of the motor output."""
     integrate_max_rate_rpm_s: float = 100.0
     """The integrator runs only while the wheel's filtered speed changes slower than this (rpm/s;
-    0.73 m/s^2 at the 0.07 m wheel). In a transient the error is the drive train's own lag, which
-    the feed-forward already allows for; integrated, it wound up: against the emulator's drive
-    train with odometry at 25 Hz, slowing from 160 to 10 rpm (1.17 to 0.07 m/s) drove the wheels
-    backwards at up to 0.12 m/s, and from 160 to 40 rpm undershot to 0.135 m/s for over a second;
-    with this gate 0.034 m/s forward at least, and 0.26 m/s. It also takes most of the overshoot
-    out of speeding up (40 to 160 rpm: 1.33 m/s peak for 1.17, against 1.21)."""
+    0.73 m/s^2 at the 0.07 m wheel). In a speed change the error is the drive train's own lag, which
+    the feed-forward already allows for; integrated, it wound up. Against the emulator's drive
+    train, odometry at 25 Hz, the control step on a wheel reading or 20 ms after one: slowing from
+    160 to 10 rpm (1.17 to 0.07 m/s) drove the wheels backwards at up to 0.135 m/s, and slowing to
+    40 rpm (0.29 m/s) dipped to 0.12-0.135 m/s for over a second; with this gate they dip to
+    0.003-0.034 and 0.23-0.26 m/s. Speeding up from 40 to 160 rpm peaked at 1.33 m/s for 1.17,
+    now 1.21."""
     speed_filter_tau_s: float = 0.06
     """Low-pass time constant on wheel speeds measured from WHEEL_DISTANCE deltas."""
     measurement_timeout_s: float = 0.3
