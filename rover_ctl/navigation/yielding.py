@@ -39,8 +39,9 @@ fraction whose least ``|d(tau*)| - R`` over tracks going straight across is larg
 only when that is the one (passing ahead of it), never by default. (Ranked on the worse of both
 velocities, the walker of seed 118 ranked full speed ahead of it above stopping, 0.53 m against
 0.23 m; the rover drove on, the rule base turned it away from the walker, which is the way the
-walker went, and it struck the rover's flank. That ranking, with ``keep_line`` below, took the
-runner's failures of seeds 1-500 of ``crossing`` from 31 to 13.)
+walker went, and it struck the rover's flank. That ranking, with ``keep_line`` below as first
+written, took the runner's failures of seeds 1-500 of ``crossing`` from 31 to 13; the figures
+since are in docs/perception.md.)
 
 Only tracks that *cross* are yielded to: the component of ``w`` across ``u`` of at least
 ``min_cross_mps`` and at least ``sin(min_cross_deg)`` of its speed (a track's velocity is noisy: a
