@@ -59,7 +59,7 @@ from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
-from rover_ctl.navigation.side_guard import pass_speed_mps, side_turn_radps
+from rover_ctl.navigation.side_guard import against_guard_removed, pass_speed_mps, side_turn_radps, way_ahead_clear
 from rover_ctl.navigation.yielding import Yielder, keep_line
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
@@ -602,6 +602,8 @@ class Autopilot:
             left, right = keep_line(left, right, yielded)
         side_turn = side_turn_radps(ranges, self.config.side_guard)  # something at a flank: turn away from it
         if side_turn:
+            if way_ahead_clear(ranges, self.config.side_guard):  # the rule base turns back towards its target only
+                left, right = against_guard_removed(left, right, side_turn)
             floor_mps = None if yielding else pass_speed_mps(ranges, speed_mps, self.config.side_guard)
             if floor_mps is not None and (left + right) / 2.0 < (floor_rpm := self._speed_to_rpm(floor_mps)):
                 raise_rpm = floor_rpm - (left + right) / 2.0  # draw ahead of it, the turn kept

@@ -39,6 +39,15 @@ clear (every front rangefinder the rover has, front and both front diagonals, re
 rover was given): it draws ahead of what is at its side, a static obstacle or a moving one,
 instead of staying beside it. The autopilot raises both wheels by the same amount, so the turn is
 kept; not while a yield holds the rover back.
+
+**Not turning back into it.** Once the guard has turned the rover far enough off its course, the
+rule base turns back towards its target, towards the side that reads close, harder than the guard
+turns away (at the rangefinder's 0.2 m minimum the guard gives 1.18 rad/s): beside a walker that
+converges on the rover's flank the two ran abreast and the rover turned into it (the runner's
+``head_on`` seeds 36 and 147). So while the guard turns and the way ahead is clear, a turn of the
+rule base against the guard's is taken out (``against_guard_removed``: both wheels at their mean,
+the forward speed kept); with something ahead the rule base's turn stands, as it may be turning
+away from that.
 """
 
 from __future__ import annotations
@@ -67,14 +76,27 @@ def side_turn_radps(ranges_m: Mapping[int, float], params: SideGuardParams) -> f
     return params.max_yaw_rate_radps * (push(RIGHT) - push(LEFT))
 
 
+def way_ahead_clear(ranges_m: Mapping[int, float], params: SideGuardParams) -> bool:
+    """Whether every front rangefinder the rover has (front and both front diagonals) reads beyond
+    ``params.front_clear_m``; False without any (NaN is not clear)."""
+    ahead = [ranges_m[o] for o in AHEAD if o in ranges_m]
+    return bool(ahead) and all(r > params.front_clear_m for r in ahead)
+
+
+def against_guard_removed(left_rpm: float, right_rpm: float, side_turn: float) -> tuple[float, float]:
+    """The rule base's wheel setpoints with a turn against the guard's (``side_turn``, rad/s CCW)
+    taken out: both wheels at their mean, the forward speed kept; unchanged otherwise."""
+    if side_turn * (right_rpm - left_rpm) < 0.0:  # the rule base turns back towards the near side
+        mean = (left_rpm + right_rpm) / 2.0
+        return mean, mean
+    return left_rpm, right_rpm
+
+
 def pass_speed_mps(ranges_m: Mapping[int, float], given_speed_mps: float, params: SideGuardParams) -> float | None:
     """The least forward speed (m/s) while the guard turns and the way ahead is clear: the smaller
     of ``params.pass_speed_mps`` and ``given_speed_mps``; None when the guard does not turn, a front
     reading is within ``params.front_clear_m`` (or not a number), the rover has no front
     rangefinder, or the floor is off."""
-    if params.pass_speed_mps <= 0.0 or side_turn_radps(ranges_m, params) == 0.0:
-        return None
-    ahead = [ranges_m[o] for o in AHEAD if o in ranges_m]
-    if not ahead or not all(r > params.front_clear_m for r in ahead):  # NaN is not clear
+    if params.pass_speed_mps <= 0.0 or side_turn_radps(ranges_m, params) == 0.0 or not way_ahead_clear(ranges_m, params):
         return None
     return max(min(params.pass_speed_mps, given_speed_mps), 0.0)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from rover_ctl.config import SideGuardParams
 from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
-from rover_ctl.navigation.side_guard import pass_speed_mps, side_turn_radps
+from rover_ctl.navigation.side_guard import against_guard_removed, pass_speed_mps, side_turn_radps, way_ahead_clear
 from rover_ctl.vocabulary import RoverMode
 
 PARAMS = SideGuardParams()
@@ -100,3 +100,39 @@ def test_the_autopilot_draws_ahead_of_a_flank_reading_only_with_the_way_ahead_cl
     assert slowed < 0.6 * PARAMS.pass_speed_mps  # the rule base, turning back against the guard, slows to turn
     assert passing > 0.8 * PARAMS.pass_speed_mps
     assert blocked == pytest.approx(_mean_speed_beside_a_close_left_reading(SideGuardParams(pass_speed_mps=0.0), 1.0))
+
+
+def test_a_turn_against_the_guard_is_taken_out_and_the_forward_speed_kept():
+    assert against_guard_removed(60.0, 140.0, -1.0) == (100.0, 100.0)  # turning left, the guard right
+    assert against_guard_removed(140.0, 60.0, 0.5) == (100.0, 100.0)  # and the mirror image
+    assert against_guard_removed(140.0, 60.0, -1.0) == (140.0, 60.0)  # turning the guard's way: kept
+    assert against_guard_removed(60.0, 140.0, 0.0) == (60.0, 140.0)  # no guard turn: untouched
+    assert against_guard_removed(80.0, 80.0, -1.0) == (80.0, 80.0)
+
+
+def test_the_way_ahead_is_clear_only_when_every_front_rangefinder_reads_beyond_front_clear():
+    assert way_ahead_clear({FRONT: 3.0, FRONT_LEFT: math.inf, LEFT: 0.2}, PARAMS)
+    assert not way_ahead_clear({FRONT: 3.0, FRONT_RIGHT: PARAMS.front_clear_m}, PARAMS)
+    assert not way_ahead_clear({FRONT: math.nan}, PARAMS)
+    assert not way_ahead_clear({LEFT: 4.0, RIGHT: 4.0}, PARAMS)  # nothing looks ahead
+
+
+def test_beside_a_close_left_reading_the_rule_base_does_not_turn_the_rover_back_into_it():
+    """The autopilot in closed loop (tests/autopilot/harness.py), its left rangefinder at 0.25 m
+    all along and the way ahead clear, on a leg whose target lies 72 degrees left of its heading.
+    The guard turns it right; once the target is far enough off, the rule base turns back towards
+    it, into the near side, harder than the guard turns away (so a walker converging on the
+    rover's flank struck it, the runner's ``head_on`` seeds 36 and 147; before the turn was taken
+    out the heading came back left after about a second). The rover now never turns left."""
+    from autopilot.harness import Bench, mission
+
+    bench = Bench()
+    bench.ranges_m.update({LEFT: 0.25, FRONT: math.inf, FRONT_LEFT: math.inf, FRONT_RIGHT: math.inf})
+    bench.ready(mission((-30.0, 10.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    headings = [bench.heading_rad]
+    bench.run(2.0, until=lambda b: headings.append(b.heading_rad) and False)
+    turns = [b - a for a, b in zip(headings, headings[1:])]
+    assert max(turns) <= 1e-9  # never left
+    assert headings[0] - headings[-1] > math.radians(30.0)  # the guard's turn, away to the right
+    assert bench.speed_mps > 0.8 * PARAMS.pass_speed_mps  # drawing ahead, not slowed to turn
