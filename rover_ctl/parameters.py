@@ -267,6 +267,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("failsafe.stuck_window_s", "FS_STUCK_TIME", 0.5, 120.0, RW, {}),
     ("failsafe.stuck_progress_m", "FS_STUCK_DIST", 0.01, 20.0, RW, {}),
     ("failsafe.stuck_min_command_mps", "FS_STUCK_SPEED", 0.0, 10.0, RW, {}),
+    ("failsafe.parked_window_s", "FS_PARKED_TIME", 0.0, 600.0, RW, {}),
     ("failsafe.back_off_s", "FS_BACKOFF_TIME", 0.0, 60.0, RW, {}),
     ("failsafe.back_off_speed_mps", "FS_BACKOFF_SPEED", 0.0, 5.0, RW, {}),
     ("failsafe.stuck_max_tries", "FS_STUCK_TRIES", 0, 100, RW, {}),

@@ -185,6 +185,7 @@ class Autopilot:
         self._clock_s = -math.inf
         self._last_step_s: float | None = None
         self._commanded_speed_mps = 0.0
+        self._wants_progress = False
         self._pose: Pose | None = None
         self._ranges: Mapping[int, RangeReading] = {}
         self._sensor_rates_hz: Mapping[str, float] = {}
@@ -459,6 +460,7 @@ class Autopilot:
             inside_fence=position is None or self.planner is None or self.planner.is_inside_fence(position),
             driving=self.armed and self.mode in modes.DRIVING_MODES,
             commanded_speed_mps=commanded,
+            wants_progress=self._wants_progress and readings.vehicle_age_s <= p.vehicle_timeout_s,
             position_en=position,
             sensor_rates_hz=readings.sensor_rates_hz,
         )
@@ -482,6 +484,7 @@ class Autopilot:
 
     def _decide(self, t_s: float, dt_s: float, pose: Pose | None, decision: FailsafeDecision, row: dict[str, Any]) -> Command:
         self._commanded_speed_mps = 0.0
+        self._wants_progress = False
         if decision.action == Action.NEUTRAL:
             return self.wheels.neutral()
         if self.mode == RoverMode.MANUAL:
@@ -613,6 +616,7 @@ class Autopilot:
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)
         self._commanded_speed_mps = (left + right) / 2.0 / self._speed_to_rpm(1.0)
+        self._wants_progress = not yielding and speed_mps > self.config.failsafe.stuck_min_command_mps
         row.update(left_set_rpm=left, right_set_rpm=right,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
         return self.wheels.step(t_s, dt_s, left, right)

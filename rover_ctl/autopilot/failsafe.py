@@ -86,6 +86,8 @@ class FailsafeInputs:
     """``Planner.is_inside_fence`` of the estimated position."""
     driving: bool = False
     commanded_speed_mps: float = 0.0
+    wants_progress: bool = False
+    """The rule base was given a speed to make (no yield holds the rover back), whatever it commands."""
     position_en: EN | None = None
     """Estimated position, for the stuck test."""
     range_times_s: Mapping[int, float] = field(default_factory=dict)
@@ -276,13 +278,14 @@ class Failsafes:
             return True
         if self._free_from is not None and math.dist(here, self._free_from) >= p.stuck_clear_m:
             self._tries, self._free_from = 0, None
-        if inputs.commanded_speed_mps <= p.stuck_min_command_mps:
+        commanded = inputs.commanded_speed_mps > p.stuck_min_command_mps
+        if not commanded and not (inputs.wants_progress and p.parked_window_s > 0.0):
             self._anchor = None
             return False
         if self._anchor is None or math.dist(here, self._anchor[1]) >= p.stuck_progress_m:
             self._anchor = (now_s, here)
             return False
-        if now_s - self._anchor[0] < p.stuck_window_s:
+        if now_s - self._anchor[0] < (p.stuck_window_s if commanded else max(p.stuck_window_s, p.parked_window_s)):
             return False
         self._tries += 1
         if self._tries > p.stuck_max_tries:

@@ -15,6 +15,7 @@ from rover_ctl.autopilot.failsafe import Action
 from rover_ctl.config import Config
 from autopilot.harness import rover_config
 from rover_ctl.mission.model import Mission
+from rover_ctl.navigation.sensors import FRONT, LEFT, RIGHT
 from rover_ctl.vocabulary import Cmd, RoverMode, Severity, mav
 
 
@@ -212,3 +213,19 @@ def test_a_fence_the_planner_cannot_use_is_ignored_and_refuses_arming():
     assert bench.texts[0].startswith("Fence part ignored:")
     assert not bench.request(bench.autopilot.arm(True)).accepted
     assert any(t.startswith("PreArm: fence unusable") for t in bench.texts)
+
+
+def test_a_rover_parked_by_its_rule_base_backs_off_and_replans():
+    """Obstacles ahead and on both sides: the rule base turns in place and crawls (under
+    stuck_min_command_mps) without getting anywhere. After parked_window_s the stuck failsafe
+    backs it off and plans around the spot ahead, as for a stalled rover."""
+    bench = Bench(rover_config())
+    bench.ranges_m.update({FRONT: 0.6, LEFT: 0.5, RIGHT: 0.5})
+    bench.ready(mission((0.0, 30.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    start_s = bench.t_s
+    assert bench.run(20.0, until=lambda b: b.autopilot.decision.action == Action.BACK_OFF)
+    assert bench.texts[-1] == "FS stuck: backing off (1/3)"
+    assert bench.t_s - start_s >= bench.config.failsafe.parked_window_s
+    bench.ranges_m.update({FRONT: math.inf, LEFT: math.inf, RIGHT: math.inf})
+    assert bench.run(5.0, until=lambda b: b.autopilot.decision.replan)

@@ -217,6 +217,25 @@ def test_progress_and_no_command_are_not_stuck():
         assert step(fs, 20 + k * 0.1, commanded_speed_mps=0.0, position_en=(2.0, 0.0)).action is Action.NONE
 
 
+def test_a_rule_base_parked_where_it_should_move_is_stuck_after_the_parked_window():
+    """Given a speed to make, the rule base may settle on near-zero wheel speeds facing obstacles
+    on both sides (the runner's ``dense_clutter`` seed 63 stood 40 s so); that is stuck too, after
+    ``parked_window_s``; asked for nothing (a yield, a hold), it is not."""
+    fs = Failsafes(STUCK)
+    window = STUCK.parked_window_s
+    for k in range(int(window * 10) - 1):
+        d = step(fs, k * 0.1, commanded_speed_mps=0.02, wants_progress=True, position_en=(0.0, 0.0))
+        assert d.action is Action.NONE
+    d = step(fs, window + 0.1, commanded_speed_mps=0.02, wants_progress=True, position_en=(0.05, 0.0))
+    assert d.action is Action.BACK_OFF and texts(d) == ["FS stuck: backing off (1/2)"]
+    fs = Failsafes(STUCK)
+    for k in range(int(window * 30)):  # held back by a yield: waiting, not stuck
+        assert step(fs, k * 0.1, commanded_speed_mps=0.0, wants_progress=False, position_en=(0.0, 0.0)).action is Action.NONE
+    fs = Failsafes(dataclasses.replace(STUCK, parked_window_s=0.0))  # off
+    for k in range(int(window * 30)):
+        assert step(fs, k * 0.1, commanded_speed_mps=0.0, wants_progress=True, position_en=(0.0, 0.0)).action is Action.NONE
+
+
 def test_stuck_tries_start_over_after_getting_free():
     fs = Failsafes(STUCK)
     run_stuck(fs, 0.0, 4.1, (0.0, 0.0))

@@ -82,7 +82,7 @@ def ex_failsafes(d: Daemon) -> list:
     fs, trace = d.autopilot.failsafes, []
     fs.used_rangefinders = frozenset({0, 1, 2, 4, 6})  # as a rangefinder plan sets them
     position = [0.0, 0.0]
-    for k in range(900):
+    for k in range(1100):
         t = k * 0.1
 
         def ramp(start: float, end: float, fresh: float) -> float:
@@ -99,7 +99,8 @@ def ex_failsafes(d: Daemon) -> list:
             estimator_healthy=not 57.0 <= t < 58.5,
             inside_fence=not 60.0 <= t < 61.0,
             driving=t >= 66.0,
-            commanded_speed_mps=0.5 if t < 86.0 else 0.25,
+            commanded_speed_mps=0.5 if t < 86.0 else 0.25 if t < 92.0 else 0.05,
+            wants_progress=t >= 92.0,  # parked by the rule base
             position_en=tuple(position),
             sensor_rates_hz={"ATTITUDE": 2.5 if 70.0 <= t < 72.0 else 25.0, "WHEEL_DISTANCE": 25.0},
         )
