@@ -200,9 +200,10 @@ class FailsafeParams:
     stuck_min_command_mps: float = 0.2
     """A forward speed setpoint above this counts as commanded motion."""
     parked_window_s: float = 10.0
-    """Stuck too: the rule base, given a speed to make and no yield holding it back, commanded less
-    than stuck_min_command_mps and moved less than stuck_progress_m for this long (s; 0: off): it
-    had settled facing obstacles on both sides of its way (docs/failsafes.md)."""
+    """Stuck too: the rule base, given a speed to make, no yield holding it back and something
+    ahead (a front rangefinder within side_guard.front_clear_m), commanded less than
+    stuck_min_command_mps and moved less than stuck_progress_m for this long (s; 0: off): it had
+    settled facing obstacles on both sides of its way (docs/failsafes.md)."""
     back_off_s: float = 2.0
     """How long to back off when stuck, before a re-plan."""
     back_off_speed_mps: float = 0.3

@@ -616,7 +616,9 @@ class Autopilot:
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)
         self._commanded_speed_mps = (left + right) / 2.0 / self._speed_to_rpm(1.0)
-        self._wants_progress = not yielding and speed_mps > self.config.failsafe.stuck_min_command_mps
+        # Parked facing something (the way ahead not clear), not crawling up to a target in the open.
+        self._wants_progress = (not yielding and speed_mps > self.config.failsafe.stuck_min_command_mps
+                                and not way_ahead_clear(ranges, self.config.side_guard))  # fmt: skip
         row.update(left_set_rpm=left, right_set_rpm=right,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
         return self.wheels.step(t_s, dt_s, left, right)

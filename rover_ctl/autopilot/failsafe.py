@@ -87,7 +87,8 @@ class FailsafeInputs:
     driving: bool = False
     commanded_speed_mps: float = 0.0
     wants_progress: bool = False
-    """The rule base was given a speed to make (no yield holds the rover back), whatever it commands."""
+    """The rule base was given a speed to make, with no yield holding the rover back and something
+    ahead of it, whatever it commands."""
     position_en: EN | None = None
     """Estimated position, for the stuck test."""
     range_times_s: Mapping[int, float] = field(default_factory=dict)
