@@ -59,7 +59,7 @@ from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
-from rover_ctl.navigation.side_guard import against_guard_removed, pass_speed_mps, side_turn_radps, way_ahead_clear
+from rover_ctl.navigation.side_guard import AHEAD, against_guard_removed, pass_speed_mps, side_turn_radps, way_ahead_clear
 from rover_ctl.navigation.yielding import Yielder, keep_line
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
@@ -616,9 +616,9 @@ class Autopilot:
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)
         self._commanded_speed_mps = (left + right) / 2.0 / self._speed_to_rpm(1.0)
-        # Parked facing something (the way ahead not clear), not crawling up to a target in the open.
+        # Parked facing something, not crawling up to a target in the open (nor blind ahead).
         self._wants_progress = (not yielding and speed_mps > self.config.failsafe.stuck_min_command_mps
-                                and not way_ahead_clear(ranges, self.config.side_guard))  # fmt: skip
+                                and any(ranges.get(o, math.inf) <= self.config.side_guard.front_clear_m for o in AHEAD))  # fmt: skip
         row.update(left_set_rpm=left, right_set_rpm=right,
                    target_distance_m=nav.inputs["target_distance_m"], target_direction_rad=nav.inputs["target_direction_rad"])  # fmt: skip
         return self.wheels.step(t_s, dt_s, left, right)
