@@ -286,7 +286,7 @@ class Failsafes:
         if self._anchor is None or math.dist(here, self._anchor[1]) >= p.stuck_progress_m:
             self._anchor = (now_s, here)
             return False
-        if now_s - self._anchor[0] < (p.stuck_window_s if commanded else max(p.stuck_window_s, p.parked_window_s)):
+        if now_s - self._anchor[0] < (p.stuck_window_s if commanded else p.parked_window_s):
             return False
         self._tries += 1
         if self._tries > p.stuck_max_tries:
