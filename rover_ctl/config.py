@@ -681,6 +681,15 @@ class SideGuardParams:
     front_clear_m: float = 1.5
     """The way ahead is clear when every front rangefinder the rover has (front and the two front
     diagonals) reads beyond this (m); 1.0 and 2.5 m changed nothing in the in-process runner."""
+    rear_range_m: float = 2.0
+    """A moving obstacle track abeam or behind the rover within this (m, centre to the track's
+    point) keeps the rover going: no slower than ``pass_speed_mps``, no turn towards it, while the
+    way ahead is clear (0: off). Nothing looks there (no rear-diagonal rangefinders), and a rover
+    that stopped to pivot towards a target behind it was walked into. 1.2, 1.5 and 2.0 m did
+    progressively better in the in-process runner (docs/perception.md "Walked into from behind")."""
+    rear_min_travel_m: float = 0.45
+    """...a track that has gone at least this far from its first echo (m): a static drum the side
+    beam slides over as the rover passes gives a track that seems to follow it."""
 
 
 @dataclass

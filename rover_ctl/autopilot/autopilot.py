@@ -59,7 +59,7 @@ from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
-from rover_ctl.navigation.side_guard import AHEAD, against_guard_removed, pass_speed_mps, side_turn_radps, way_ahead_clear
+from rover_ctl.navigation.side_guard import AHEAD, against_guard_removed, pass_speed_mps, rear_mover_side, side_turn_radps, way_ahead_clear
 from rover_ctl.navigation.yielding import Yielder, keep_line
 from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
@@ -73,7 +73,7 @@ LOG_COLUMNS = (
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
-    "map_obstacles", "evade_track", "side_turn_radps", "side_pass_mps",
+    "map_obstacles", "evade_track", "side_turn_radps", "side_pass_mps", "side_rear",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 _EMPTY_ROW = dict.fromkeys(LOG_COLUMNS, "")
@@ -577,7 +577,8 @@ class Autopilot:
             speed_mps = min(speed_mps, self._loop.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
         course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
-        if self.config.yielding.enabled or self.config.evasion.enabled:
+        tracking = self.config.yielding.enabled or self.config.evasion.enabled
+        if tracking:
             rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
             tracks = self.proximity.tracker.moving(t_s, rover_velocity)
         yielding = False
@@ -609,12 +610,17 @@ class Autopilot:
                 left, right = against_guard_removed(left, right, side_turn)
             floor_mps = None if yielding else pass_speed_mps(ranges, speed_mps, self.config.side_guard)
             if floor_mps is not None and (left + right) / 2.0 < (floor_rpm := self._speed_to_rpm(floor_mps)):
-                raise_rpm = floor_rpm - (left + right) / 2.0  # draw ahead of it, the turn kept
-                left, right = left + raise_rpm, right + raise_rpm
+                left, right = self._raised_to(left, right, floor_rpm)  # draw ahead of it, the turn kept
                 row.update(side_pass_mps=floor_mps)
             half_rpm = self._speed_to_rpm(side_turn * self.config.robot.track_m / 2.0)
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)
+        if tracking and not yielding and way_ahead_clear(ranges, self.config.side_guard):
+            rear = rear_mover_side(tracks, t_s, pose.east_m, pose.north_m, pose.heading_rad, self.config.side_guard)
+            if rear:  # a walker where no beam looks: go on away from it, neither stopping nor turning into it
+                left, right = against_guard_removed(left, right, -rear)
+                left, right = self._raised_to(left, right, self._speed_to_rpm(min(self.config.side_guard.pass_speed_mps, speed_mps)))
+                row.update(side_rear=rear)
         self._commanded_speed_mps = (left + right) / 2.0 / self._speed_to_rpm(1.0)
         # Parked facing something, not crawling up to a target in the open (nor blind ahead).
         self._wants_progress = (not yielding and speed_mps > self.config.failsafe.stuck_min_command_mps
@@ -655,6 +661,12 @@ class Autopilot:
         left, right = self._speed_to_rpm(speed_mps - turn_mps), self._speed_to_rpm(speed_mps + turn_mps)
         row.update(left_set_rpm=left, right_set_rpm=right)
         return self.wheels.step(t_s, dt_s, left, right)
+
+    @staticmethod
+    def _raised_to(left_rpm: float, right_rpm: float, floor_rpm: float) -> tuple[float, float]:
+        """Both wheels raised by the same amount so that their mean is at least ``floor_rpm`` (the turn kept)."""
+        raise_rpm = floor_rpm - (left_rpm + right_rpm) / 2.0
+        return (left_rpm + raise_rpm, right_rpm + raise_rpm) if raise_rpm > 0.0 else (left_rpm, right_rpm)
 
     def _speed_to_rpm(self, speed_mps: float) -> float:
         return speed_mps / (2.0 * math.pi * self.config.robot.wheel_radius_m) * 60.0

@@ -48,14 +48,29 @@ converges on the rover's flank the two ran abreast and the rover turned into it 
 rule base against the guard's is taken out (``against_guard_removed``: both wheels at their mean,
 the forward speed kept); with something ahead the rule base's turn stands, as it may be turning
 away from that.
+
+**Walked into from behind.** No rangefinder looks at the rear quarters (the six are front, the
+front diagonals, the sides and the back), and a walker that has passed the rover on its flank is
+there. Having stepped aside from one walker and met a second late, the rule base turns the rover
+right round, away from its target; with the walker at its side the guard keeps it going, but once
+the walker slips aft of the side beam the guard lets go and the rule base, its target behind,
+stops to pivot back, and the walker, converging at 0.5-0.8 m/s, walks into its rear quarter (most
+of the runner's ``head_on`` failures, seeds 1-500). The tracker still holds the walker there. So
+while a moving track that has travelled ``rear_min_travel_m`` (a real mover, not a static drum's
+echo sliding along with the rover) is abeam or behind the rover within ``rear_range_m``
+(``rear_mover_side``) and the way ahead is clear, the rover goes on as beside a walker: at least
+the passing speed, and a turn of the rule base towards the track's side taken out, until the
+walker is left behind.
 """
 
 from __future__ import annotations
 
-from typing import Mapping
+import math
+from typing import Iterable, Mapping
 
 from rover_ctl.config import SideGuardParams
 from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
+from rover_ctl.navigation.tracks import Track
 
 AHEAD = (FRONT, FRONT_RIGHT, FRONT_LEFT)
 """The front rangefinder and the two front diagonals: the way ahead."""
@@ -100,3 +115,23 @@ def pass_speed_mps(ranges_m: Mapping[int, float], given_speed_mps: float, params
     if params.pass_speed_mps <= 0.0 or side_turn_radps(ranges_m, params) == 0.0 or not way_ahead_clear(ranges_m, params):
         return None
     return max(min(params.pass_speed_mps, given_speed_mps), 0.0)
+
+
+def rear_mover_side(tracks: Iterable[Track], time_s: float, east_m: float, north_m: float, heading_rad: float,
+                    params: SideGuardParams) -> float:  # fmt: skip
+    """The side (+1 left, -1 right, 0 none) of the nearest moving track abeam or behind the rover
+    (its point at ``time_s`` not ahead of the rover's centre) within ``params.rear_range_m`` of the
+    centre that has gone at least ``params.rear_min_travel_m`` from its first echo."""
+    if not params.enabled or params.rear_range_m <= 0.0:
+        return 0.0
+    c, s = math.cos(heading_rad), math.sin(heading_rad)
+    side, nearest_m = 0.0, params.rear_range_m
+    for track in tracks:
+        if track.travel_m < params.rear_min_travel_m:
+            continue
+        e, n = track.position_at(time_s)
+        d_east, d_north = e - east_m, n - north_m
+        distance_m = math.hypot(d_east, d_north)
+        if d_east * c + d_north * s <= 0.0 and distance_m < nearest_m:
+            side, nearest_m = (1.0 if d_north * c - d_east * s > 0.0 else -1.0), distance_m
+    return side

@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 from rover_ctl.config import SideGuardParams
 from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
-from rover_ctl.navigation.side_guard import against_guard_removed, pass_speed_mps, side_turn_radps, way_ahead_clear
+from rover_ctl.navigation.side_guard import against_guard_removed, pass_speed_mps, rear_mover_side, side_turn_radps, way_ahead_clear
+from rover_ctl.navigation.tracks import Track
 from rover_ctl.vocabulary import RoverMode
 
 PARAMS = SideGuardParams()
@@ -136,3 +137,66 @@ def test_beside_a_close_left_reading_the_rule_base_does_not_turn_the_rover_back_
     assert max(turns) <= 1e-9  # never left
     assert headings[0] - headings[-1] > math.radians(30.0)  # the guard's turn, away to the right
     assert bench.speed_mps > 0.8 * PARAMS.pass_speed_mps  # drawing ahead, not slowed to turn
+
+
+def _walker(east_m: float, north_m: float, travel_m: float = 1.0, ident: int = 1, time_s: float = 0.0) -> Track:
+    """A moving track at (east_m, north_m) walking north at 0.6 m/s, ``travel_m`` from its first echo."""
+    return Track(ident, time_s, east_m, north_m, 0.0, 0.6, hits=20, last_echo_s=time_s, born_en=(east_m, north_m - travel_m))
+
+
+def test_a_walker_abeam_or_behind_within_range_is_on_its_side():
+    north = math.pi / 2  # the rover at the origin pointing north: left is west
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0
+    assert rear_mover_side([_walker(0.6, -0.5)], 0.0, 0.0, 0.0, north, PARAMS) == -1.0
+    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # abeam
+    assert rear_mover_side([_walker(-0.1, -1.5)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # nearly dead astern
+    assert rear_mover_side([_walker(-0.6, -0.5), _walker(0.3, -0.3, ident=2)], 0.0, 0.0, 0.0, north, PARAMS) == -1.0  # the nearer
+    coming = Track(4, -3.0, -0.6, 1.3, 0.0, -0.6, hits=20, last_echo_s=-3.0, born_en=(-0.6, 3.0))  # ahead 3 s ago
+    assert rear_mover_side([coming], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # where it is now, not where it was
+    assert rear_mover_side([_walker(-1.0, -1.0, ident=3)], 0.0, 0.0, 0.0, 0.0, PARAMS) == -1.0  # pointing east: right is south
+
+
+def test_no_side_for_a_walker_ahead_far_off_barely_moved_or_with_the_check_off():
+    north = math.pi / 2
+    assert rear_mover_side([], 0.0, 0.0, 0.0, north, PARAMS) == 0.0
+    assert rear_mover_side([_walker(-0.6, 0.3)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # ahead of the centre
+    assert rear_mover_side([_walker(-1.5, -1.5)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # beyond rear_range_m
+    assert rear_mover_side([_walker(-0.6, -0.5, travel_m=0.3)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # a static drum's sliding echo
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(rear_range_m=0.0)) == 0.0
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(enabled=False)) == 0.0
+
+
+def _turn_and_travel_with_a_walker_behind_left(params: SideGuardParams) -> tuple[float, float, set]:
+    """The autopilot in closed loop (tests/autopilot/harness.py), pointing north with its target
+    20 m behind it and a little left, a walker 0.7 m behind its left rear quarter converging on its
+    way at 0.42 m/s (a track put into the tracker every step, as the rangefinders would have left it):
+    (heading change, distance travelled, the control log's side_rear values) over 1.5 s."""
+    from autopilot.harness import Bench, mission
+
+    bench = Bench()
+    bench.config.side_guard = params
+    bench.ready(mission((-3.0, -20.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    start = (bench.heading_rad, bench.east_m, bench.north_m, bench.t_s)
+    tracker, sides = bench.autopilot.proximity.tracker, set()
+
+    def walker_and_log(b: Bench) -> bool:
+        sides.add(b.outputs[-1].log_row["side_rear"])
+        walked_m = 0.3 * (b.t_s - start[3])  # north-east at 0.3 m/s each way: never at the rover's own velocity
+        tracker.tracks = [Track(1, b.t_s, start[1] - 0.5 + walked_m, start[2] - 0.5 + walked_m, 0.3, 0.3, hits=20, last_echo_s=b.t_s,
+                                born_en=(start[1] - 1.5, start[2] - 1.5))]  # fmt: skip
+        return False
+
+    walker_and_log(bench)
+    bench.run(1.5, until=walker_and_log)
+    return bench.heading_rad - start[0], math.dist((bench.east_m, bench.north_m), start[1:3]), sides
+
+
+def test_with_a_walker_behind_the_rover_drives_on_away_from_it_instead_of_pivoting_into_its_way():
+    """The rule base, its target behind, stops to pivot left, towards a walker converging on the
+    rover's left rear quarter where no rangefinder looks (most of the runner's ``head_on`` failures):
+    with the walker tracked there the rover goes on at the passing speed and does not turn left."""
+    turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(PARAMS)
+    assert turn <= 1e-9 and travel_m > 1.0 and 1.0 in sides
+    turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(SideGuardParams(rear_range_m=0.0))
+    assert turn > math.radians(90.0) and travel_m < 1.0 and 1.0 not in sides  # without it: the pivot round towards the target

@@ -30,6 +30,7 @@ from rover_ctl.config import Config, ObstacleMapParams
 from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
 from rover_ctl.mavlink.params import ConfigParams
 from rover_ctl.mission.model import Mission, MissionItem
+from rover_ctl.navigation.tracks import Track
 from rover_ctl.autopilot import prearm
 from rover_ctl.autopilot.autopilot import LOG_COLUMNS
 from rover_ctl.autopilot.failsafe import Action, FailsafeDecision, FailsafeInputs
@@ -214,7 +215,6 @@ def ex_tracks(d: Daemon) -> list:
 def ex_yielding(d: Daemon) -> list:
     """The rover drives north at 1.2 m/s (when let) past obstacles crossing at several angles and
     speeds; one track is lost halfway and must be waited for as last seen."""
-    from rover_ctl.navigation.tracks import Track
 
     yielder, trace = d.autopilot.yielder, []
     for ve, vn, speed_limit in ((0.8, 0.0, 1.2), (0.45, -0.45, 1.2), (0.5, -0.3, 1.2), (0.17, 0.0, 1.2), (0.12, 0.0, 1.2),
@@ -279,7 +279,8 @@ def ex_side_guard(d: Daemon) -> list:
     """The rule base's wheels along a leg north, with something at the left or right flank at
     several ranges (the side guard turns the rover away from it), then turned 35 degrees right of
     the leg (the rule base slows to turn back; the guard keeps the passing speed while the front
-    reads clear), the last with something ahead too."""
+    reads clear), the last with something ahead too; then its target behind and a walker tracked
+    behind its left rear quarter (it drives on instead of pivoting towards it)."""
     from rover_ctl.estimation.readings import RangeReading
 
     ap, trace = d.autopilot, []
@@ -292,6 +293,13 @@ def ex_side_guard(d: Daemon) -> list:
         row = dict.fromkeys(LOG_COLUMNS, "")
         ap._drive(k * 10.0, 0.04, pose, (0.0, 20.0), 1.2, 1, clear, row)  # 10 s apart: the memory forgets
         trace.append((round(row["left_set_rpm"], 9), round(row["right_set_rpm"], 9), row["side_turn_radps"], row["side_pass_mps"]))
+    # Its target behind, a walker behind its left rear quarter (1.3 m off, 0.6 m from its first echo).
+    pose = SimpleNamespace(east_m=0.0, north_m=0.0, heading_rad=math.pi / 2, speed_mps=0.2)
+    ap._ranges = {o: RangeReading(100.0, o, o, 4.0, 0.2, 4.0) for o in (0, 1, 2, 6, 7)}
+    ap.proximity.tracker.tracks = [Track(1, 100.0, -0.9, -0.9, 0.3, 0.3, hits=20, last_echo_s=100.0, born_en=(-1.3, -1.35))]
+    row = dict.fromkeys(LOG_COLUMNS, "")
+    ap._drive(100.0, 0.04, pose, (-3.0, -20.0), 1.2, 1, clear, row)
+    trace.append((round(row["left_set_rpm"], 9), round(row["right_set_rpm"], 9), row["side_rear"]))
     return trace
 
 
