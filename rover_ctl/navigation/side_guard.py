@@ -58,9 +58,10 @@ stops to pivot back, and the walker, converging at 0.5-0.8 m/s, walks into its r
 of the runner's ``head_on`` failures, seeds 1-500). The tracker still holds the walker there. So
 while a moving track that has travelled ``rear_min_travel_m`` (a real mover, not a static drum's
 echo sliding along with the rover) is abeam or behind the rover within ``rear_range_m``
-(``rear_mover_side``) and the way ahead is clear, the rover goes on as beside a walker: at least
-the passing speed, and a turn of the rule base towards the track's side taken out, until the
-walker is left behind.
+(``rear_mover_side``), the way ahead is clear and no yield holds the rover, it goes on as beside
+a walker: at least the passing speed, and a turn towards the track's side taken out (the rule
+base's, or the guard's away from something on the other flank: the rover then goes straight),
+until the walker is left behind.
 """
 
 from __future__ import annotations
