@@ -61,7 +61,8 @@ echo sliding along with the rover) is abeam or behind the rover within ``rear_ra
 (``rear_mover_side``), the way ahead is clear and no yield holds the rover, it goes on as beside
 a walker: at least the passing speed, and a turn towards the track's side taken out (the rule
 base's, or the guard's away from something on the other flank: the rover then goes straight),
-until the walker is left behind.
+until the walker is left behind. Off by default (``rear_range_m`` 0): among walls it also acts on
+the tracks a swept wall gives (docs/perception.md "Walked into from behind").
 """
 
 from __future__ import annotations

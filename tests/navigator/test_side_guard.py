@@ -144,26 +144,34 @@ def _walker(east_m: float, north_m: float, travel_m: float = 1.0, ident: int = 1
     return Track(ident, time_s, east_m, north_m, 0.0, 0.6, hits=20, last_echo_s=time_s, born_en=(east_m, north_m - travel_m))
 
 
+REAR = SideGuardParams(rear_range_m=2.0)
+"""The rear check on, at the range measured (off by default, docs/perception.md "Walked into from behind")."""
+
+
+def test_the_rear_check_is_off_by_default():
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, math.pi / 2, PARAMS) == 0.0
+
+
 def test_a_walker_abeam_or_behind_within_range_is_on_its_side():
     north = math.pi / 2  # the rover at the origin pointing north: left is west
-    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0
-    assert rear_mover_side([_walker(0.6, -0.5)], 0.0, 0.0, 0.0, north, PARAMS) == -1.0
-    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # abeam
-    assert rear_mover_side([_walker(-0.1, -1.5)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # nearly dead astern
-    assert rear_mover_side([_walker(-0.6, -0.5), _walker(0.3, -0.3, ident=2)], 0.0, 0.0, 0.0, north, PARAMS) == -1.0  # the nearer
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, REAR) == 1.0
+    assert rear_mover_side([_walker(0.6, -0.5)], 0.0, 0.0, 0.0, north, REAR) == -1.0
+    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, REAR) == 1.0  # abeam
+    assert rear_mover_side([_walker(-0.1, -1.5)], 0.0, 0.0, 0.0, north, REAR) == 1.0  # nearly dead astern
+    assert rear_mover_side([_walker(-0.6, -0.5), _walker(0.3, -0.3, ident=2)], 0.0, 0.0, 0.0, north, REAR) == -1.0  # the nearer
     coming = Track(4, -3.0, -0.6, 1.3, 0.0, -0.6, hits=20, last_echo_s=-3.0, born_en=(-0.6, 3.0))  # ahead 3 s ago
-    assert rear_mover_side([coming], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # where it is now, not where it was
-    assert rear_mover_side([_walker(-1.0, -1.0, ident=3)], 0.0, 0.0, 0.0, 0.0, PARAMS) == -1.0  # pointing east: right is south
+    assert rear_mover_side([coming], 0.0, 0.0, 0.0, north, REAR) == 1.0  # where it is now, not where it was
+    assert rear_mover_side([_walker(-1.0, -1.0, ident=3)], 0.0, 0.0, 0.0, 0.0, REAR) == -1.0  # pointing east: right is south
 
 
 def test_no_side_for_a_walker_ahead_far_off_barely_moved_or_with_the_check_off():
     north = math.pi / 2
-    assert rear_mover_side([], 0.0, 0.0, 0.0, north, PARAMS) == 0.0
-    assert rear_mover_side([_walker(-0.6, 0.3)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # ahead of the centre
-    assert rear_mover_side([_walker(-1.5, -1.5)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # beyond rear_range_m
-    assert rear_mover_side([_walker(-0.6, -0.5, travel_m=0.3)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # a static drum's sliding echo
+    assert rear_mover_side([], 0.0, 0.0, 0.0, north, REAR) == 0.0
+    assert rear_mover_side([_walker(-0.6, 0.3)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # ahead of the centre
+    assert rear_mover_side([_walker(-1.5, -1.5)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # beyond rear_range_m
+    assert rear_mover_side([_walker(-0.6, -0.5, travel_m=0.3)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # a static drum's sliding echo
     assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(rear_range_m=0.0)) == 0.0
-    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(enabled=False)) == 0.0
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(enabled=False, rear_range_m=2.0)) == 0.0
 
 
 def _turn_and_travel_with_a_walker_behind_left(params: SideGuardParams) -> tuple[float, float, set]:
@@ -196,7 +204,7 @@ def test_with_a_walker_behind_the_rover_drives_on_away_from_it_instead_of_pivoti
     """The rule base, its target behind, stops to pivot left, towards a walker converging on the
     rover's left rear quarter where no rangefinder looks (most of the runner's ``head_on`` failures):
     with the walker tracked there the rover goes on at the passing speed and does not turn left."""
-    turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(PARAMS)
+    turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(REAR)
     assert turn <= 1e-9 and travel_m > 1.0 and 1.0 in sides
     turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(SideGuardParams(rear_range_m=0.0))
     assert turn > math.radians(90.0) and travel_m < 1.0 and 1.0 not in sides  # without it: the pivot round towards the target
