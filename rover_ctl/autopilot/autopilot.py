@@ -615,13 +615,12 @@ class Autopilot:
             half_rpm = self._speed_to_rpm(side_turn * self.config.robot.track_m / 2.0)
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)
-        if tracking and not yielding and way_ahead_clear(ranges, self.config.side_guard):
-            rear = rear_mover_side(tracks, t_s, pose.east_m, pose.north_m, pose.heading_rad, self.config.side_guard)
-            if rear:  # a walker where no beam looks: go on away from it, neither stopping nor turning into it
-                left, right = against_guard_removed(left, right, -rear)  # the guard's too, turning away from the other flank
-                if self.config.side_guard.pass_speed_mps > 0.0:  # 0: no passing speed, here as beside a walker
-                    left, right = self._raised_to(left, right, self._speed_to_rpm(min(self.config.side_guard.pass_speed_mps, speed_mps)))
-                row.update(side_rear=rear)
+        rear = rear_mover_side(tracks, t_s, pose.east_m, pose.north_m, pose.heading_rad, self.config.side_guard) if tracking and not yielding else 0.0
+        if rear and way_ahead_clear(ranges, self.config.side_guard):  # a walker where no beam looks: go on away from it, neither stopping nor turning into it
+            left, right = against_guard_removed(left, right, -rear)  # the guard's too, turning away from the other flank
+            if self.config.side_guard.pass_speed_mps > 0.0:  # 0: no passing speed, here as beside a walker
+                left, right = self._raised_to(left, right, self._speed_to_rpm(min(self.config.side_guard.pass_speed_mps, speed_mps)))
+            row.update(side_rear=rear)
         self._commanded_speed_mps = (left + right) / 2.0 / self._speed_to_rpm(1.0)
         # Parked facing something, not crawling up to a target in the open (nor blind ahead).
         self._wants_progress = (not yielding and speed_mps > self.config.failsafe.stuck_min_command_mps

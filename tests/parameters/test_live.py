@@ -215,7 +215,6 @@ def ex_tracks(d: Daemon) -> list:
 def ex_yielding(d: Daemon) -> list:
     """The rover drives north at 1.2 m/s (when let) past obstacles crossing at several angles and
     speeds; one track is lost halfway and must be waited for as last seen."""
-
     yielder, trace = d.autopilot.yielder, []
     for ve, vn, speed_limit in ((0.8, 0.0, 1.2), (0.45, -0.45, 1.2), (0.5, -0.3, 1.2), (0.17, 0.0, 1.2), (0.12, 0.0, 1.2),
                                 (0.6, 0.3, 1.2), (0.6, 0.0, 0.4)):  # fmt: skip
