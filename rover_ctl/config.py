@@ -681,19 +681,22 @@ class SideGuardParams:
     front_clear_m: float = 1.5
     """The way ahead is clear when every front rangefinder the rover has (front and the two front
     diagonals) reads beyond this (m); 1.0 and 2.5 m changed nothing in the in-process runner."""
-    rear_range_m: float = 0.0
-    """A moving obstacle track abeam or behind the rover within this (m, centre to the track's
-    point) keeps the rover going: no slower than ``pass_speed_mps`` (never above the speed given),
-    no turn towards it, while the way ahead is clear and no yield holds the rover (needs the
-    tracks, which yielding or evasion builds). No rangefinder looks there, and a rover that stopped
-    to pivot towards a target behind it was walked into: in the in-process runner's ``head_on``
-    seeds 1-500, 22 failed episodes without it; 15, 11 and 9 at 1.2, 1.5 and 2.0 m (without the
-    travel condition below; 10 with it). 0, the default: off, because among walls it acts on the
-    tracks a swept wall gives, and in the cul-de-sac with ``OMAP_ENABLE`` the rover wandered back
-    into the U (51 -> 102 s; docs/perception.md "Walked into from behind")."""
+    rear_range_m: float = 2.0
+    """A moving obstacle track behind the side beams (``rear_min_bearing_deg``) within this (m,
+    centre to the track's point) keeps the rover going: no slower than ``pass_speed_mps`` (never
+    above the speed given), no turn towards it, while the way ahead is clear and no yield holds the
+    rover (needs the tracks, which yielding or evasion builds; 0: off). No rangefinder looks there,
+    and a rover that stopped to pivot towards a target behind it was walked into: in the in-process
+    runner's ``head_on`` seeds 1-500, 22 failed episodes without it, 13 with it (docs/perception.md
+    "Walked into from behind")."""
     rear_min_travel_m: float = 0.45
     """A track counts for ``rear_range_m`` only once it has gone this far from its first echo (m):
     a static drum the side beam slides over as the rover passes gives a track that seems to follow it."""
+    rear_min_bearing_deg: float = 100.0
+    """A track counts for ``rear_range_m`` only this far round from the heading (deg, either side,
+    seen from the rover's centre; 90: abeam counts too): behind the side rangefinders, whose 15 deg
+    cones reach 97.5 deg, where no beam sees it. Abeam a side beam does, and the guard answers; and
+    the tracks there are mostly a wall's echo sliding along a passing or turning rover's beam."""
 
 
 @dataclass

@@ -435,6 +435,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("side_guard.front_clear_m", "SIDE_FRONT_CLR", 0.0, 10.0, RW, {}),
     ("side_guard.rear_range_m", "SIDE_REAR_RNG", 0.0, 10.0, RW, {}),
     ("side_guard.rear_min_travel_m", "SIDE_REAR_TRAV", 0.0, 10.0, RW, {}),
+    ("side_guard.rear_min_bearing_deg", "SIDE_REAR_BRG", 90.0, 180.0, RW, {"units": "deg"}),
     ("obstacle_map.enabled", "OMAP_ENABLE", 0, 1, RW, {}),
     ("obstacle_map.cell_m", "OMAP_CELL", 0.05, 5.0, RW, {}),
     ("obstacle_map.miss_score", "OMAP_MISS", 0.0, 100.0, RW, {}),

@@ -57,12 +57,14 @@ the walker slips aft of the side beam the guard lets go and the rule base, its t
 stops to pivot back, and the walker, converging at 0.5-0.8 m/s, walks into its rear quarter (most
 of the runner's ``head_on`` failures, seeds 1-500). The tracker still holds the walker there. So
 while a moving track that has travelled ``rear_min_travel_m`` (a real mover, not a static drum's
-echo sliding along with the rover) is abeam or behind the rover within ``rear_range_m``
-(``rear_mover_side``), the way ahead is clear and no yield holds the rover, it goes on as beside
-a walker: at least the passing speed, and a turn towards the track's side taken out (the rule
-base's, or the guard's away from something on the other flank: the rover then goes straight),
-until the walker is left behind. Off by default (``rear_range_m`` 0): among walls it also acts on
-the tracks a swept wall gives (docs/perception.md "Walked into from behind").
+echo sliding along with the rover) is behind the side beams (``rear_min_bearing_deg`` round from
+the heading) within ``rear_range_m`` (``rear_mover_side``), the way ahead is clear and no yield
+holds the rover, it goes on as beside a walker: at least the passing speed, and a turn towards
+the track's side taken out (the rule base's, or the guard's away from something on the other
+flank: the rover then goes straight), until the walker is left behind. Not abeam: there the side
+beam sees what is there, and most tracks abeam are a wall's echo sliding along the beam of a rover
+passing or turning by it, which the check, acting on them, made wander (docs/perception.md
+"Walked into from behind").
 """
 
 from __future__ import annotations
@@ -121,12 +123,14 @@ def pass_speed_mps(ranges_m: Mapping[int, float], given_speed_mps: float, params
 
 def rear_mover_side(tracks: Iterable[Track], time_s: float, east_m: float, north_m: float, heading_rad: float,
                     params: SideGuardParams) -> float:  # fmt: skip
-    """The side (+1 left, -1 right, 0 none) of the nearest moving track abeam or behind the rover
-    (its point at ``time_s`` not ahead of the rover's centre) within ``params.rear_range_m`` of the
-    centre that has gone at least ``params.rear_min_travel_m`` from its first echo."""
+    """The side (+1 left, -1 right, 0 none) of the nearest moving track behind the side beams (its
+    point at ``time_s`` at least ``params.rear_min_bearing_deg`` round from the heading, seen from
+    the rover's centre) within ``params.rear_range_m`` of the centre that has gone at least
+    ``params.rear_min_travel_m`` from its first echo."""
     if not params.enabled or params.rear_range_m <= 0.0:
         return 0.0
     c, s = math.cos(heading_rad), math.sin(heading_rad)
+    aft_cos = math.cos(math.radians(params.rear_min_bearing_deg))
     side, nearest_m = 0.0, params.rear_range_m
     for track in tracks:
         if track.travel_m < params.rear_min_travel_m:
@@ -134,6 +138,6 @@ def rear_mover_side(tracks: Iterable[Track], time_s: float, east_m: float, north
         e, n = track.position_at(time_s)
         d_east, d_north = e - east_m, n - north_m
         distance_m = math.hypot(d_east, d_north)
-        if d_east * c + d_north * s <= 0.0 and distance_m < nearest_m:
+        if d_east * c + d_north * s <= aft_cos * distance_m and distance_m < nearest_m:
             side, nearest_m = (1.0 if d_north * c - d_east * s > 0.0 else -1.0), distance_m
     return side

@@ -144,24 +144,33 @@ def _walker(east_m: float, north_m: float, travel_m: float = 1.0, ident: int = 1
     return Track(ident, time_s, east_m, north_m, 0.0, 0.6, hits=20, last_echo_s=time_s, born_en=(east_m, north_m - travel_m))
 
 
-REAR = SideGuardParams(rear_range_m=2.0)
-"""The rear check on, at the range measured (off by default, docs/perception.md "Walked into from behind")."""
+REAR = PARAMS
+"""The rear check as shipped: within 2 m, behind the side beams (docs/perception.md "Walked into from behind")."""
 
 
-def test_the_rear_check_is_off_by_default():
-    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, math.pi / 2, PARAMS) == 0.0
-
-
-def test_a_walker_abeam_or_behind_within_range_is_on_its_side():
+def test_a_walker_behind_the_side_beams_within_range_is_on_its_side():
     north = math.pi / 2  # the rover at the origin pointing north: left is west
     assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, REAR) == 1.0
     assert rear_mover_side([_walker(0.6, -0.5)], 0.0, 0.0, 0.0, north, REAR) == -1.0
-    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, REAR) == 1.0  # abeam
     assert rear_mover_side([_walker(-0.1, -1.5)], 0.0, 0.0, 0.0, north, REAR) == 1.0  # nearly dead astern
     assert rear_mover_side([_walker(-0.6, -0.5), _walker(0.3, -0.3, ident=2)], 0.0, 0.0, 0.0, north, REAR) == -1.0  # the nearer
     coming = Track(4, -3.0, -0.6, 1.3, 0.0, -0.6, hits=20, last_echo_s=-3.0, born_en=(-0.6, 3.0))  # ahead 3 s ago
     assert rear_mover_side([coming], 0.0, 0.0, 0.0, north, REAR) == 1.0  # where it is now, not where it was
     assert rear_mover_side([_walker(-1.0, -1.0, ident=3)], 0.0, 0.0, 0.0, 0.0, REAR) == -1.0  # pointing east: right is south
+
+
+def test_abeam_a_walker_counts_only_when_the_bearing_limit_lets_it():
+    north = math.pi / 2
+    bearing = math.radians(REAR.rear_min_bearing_deg)
+
+    def at(degrees_off: float) -> Track:  # 1 m from the centre, this far past the bearing limit, on the left
+        angle = north + bearing + math.radians(degrees_off)
+        return _walker(math.cos(angle), math.sin(angle))
+
+    assert rear_mover_side([at(-5.0)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # still in the side beam's reach
+    assert rear_mover_side([at(5.0)], 0.0, 0.0, 0.0, north, REAR) == 1.0
+    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # abeam
+    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, SideGuardParams(rear_min_bearing_deg=90.0)) == 1.0
 
 
 def test_no_side_for_a_walker_ahead_far_off_barely_moved_or_with_the_check_off():

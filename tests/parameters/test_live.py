@@ -518,12 +518,6 @@ def mission_ahead(d: Daemon) -> None:
     with_mission(d, [wp(0, 20)])
 
 
-def rear_check_on(d: Daemon) -> None:
-    """A mission ahead and the side guard's rear check on (off by default)."""
-    mission_ahead(d)
-    d.config.side_guard.rear_range_m = 2.0
-
-
 EXERCISES = {
     # name: (what the daemon has built before the change, the exercise after it, keys it reads)
     "failsafes": (no_mission, ex_failsafes, ("failsafe.",)),
@@ -547,7 +541,6 @@ EXERCISES = {
     "obstacle_map": (mapping, ex_obstacle_map, tuple(f"obstacle_map.{f.name}" for f in dataclasses.fields(ObstacleMapParams) if f.name != "enabled")),
     "map_switch": (mission_ahead, ex_map_switch, ("obstacle_map.enabled",)),
     "side_guard": (mission_ahead, ex_side_guard, ("side_guard.", "robot.track_m", "robot.wheel_radius_m")),
-    "side_rear": (rear_check_on, ex_side_guard, ("side_guard.rear_min_travel_m",)),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
 
