@@ -14,8 +14,9 @@ passes, and a few centimetres of GPS noise choose between them (seed 2 drove 38.
 and 29.5 m in a suite's SITL run, after agreeing in four runs before). Only ``crossing`` worlds
 whose outcome does not hang on the start: the runner, started every 0.5 s of sim time from 20 to
 76 s (2026-11-28), succeeds at all 113 starts of seeds 3 and 5 (with the side guard's rear check
-off and on), while seed 1 struck a drum at 6 of 41 starts from 20 to 40 s (check off), seed 6 at 2 and seed 7 at 1 of the 113 (and seed 2 at one start of
-2026-11-26, just when a clean-clone suite's SITL run armed), so those fail the test by chance.
+off and on), while seed 1 struck a drum at 6 of 41 starts from 20 to 40 s (check off), seed 6 at
+2 and seed 7 at 1 of the 113 (and seed 2 at one start of 2026-11-26, just when a clean-clone
+suite's SITL run armed), so those fail the test by chance.
 """
 
 from __future__ import annotations
