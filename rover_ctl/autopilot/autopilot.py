@@ -616,7 +616,8 @@ class Autopilot:
             left, right = left - half_rpm, right + half_rpm
             row.update(side_turn_radps=side_turn)
         rear = rear_mover_side(tracks, t_s, pose.east_m, pose.north_m, pose.heading_rad, self.config.side_guard) if tracking and not yielding else 0.0
-        if rear and way_ahead_clear(ranges, self.config.side_guard):  # a walker where no beam looks: go on away from it, neither stopping nor turning into it
+        # A walker where no beam looks: go on away from it, neither stopping nor turning into it.
+        if rear and way_ahead_clear(ranges, self.config.side_guard):
             left, right = against_guard_removed(left, right, -rear)  # the guard's too, turning away from the other flank
             if self.config.side_guard.pass_speed_mps > 0.0:  # 0: no passing speed, here as beside a walker
                 left, right = self._raised_to(left, right, self._speed_to_rpm(min(self.config.side_guard.pass_speed_mps, speed_mps)))

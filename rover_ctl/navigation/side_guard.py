@@ -62,8 +62,9 @@ the heading) within ``rear_range_m`` (``rear_mover_side``), the way ahead is cle
 holds the rover, it goes on as beside a walker: at least the passing speed, and a turn towards
 the track's side taken out (the rule base's, or the guard's away from something on the other
 flank: the rover then goes straight), until the walker is left behind. Not abeam: there the side
-beam sees what is there, and most tracks abeam are a wall's echo sliding along the beam of a rover
-passing or turning by it, which the check, acting on them, made wander (docs/perception.md
+beam sees what is there, and among walls most of the tracks the check acted on lay there, a
+wall's echo sliding along the beam of a rover passing or turning by it; acting on them took the
+rover wide, and back into a cul-de-sac it had planned its way out of (docs/perception.md
 "Walked into from behind").
 """
 

@@ -144,43 +144,39 @@ def _walker(east_m: float, north_m: float, travel_m: float = 1.0, ident: int = 1
     return Track(ident, time_s, east_m, north_m, 0.0, 0.6, hits=20, last_echo_s=time_s, born_en=(east_m, north_m - travel_m))
 
 
-REAR = PARAMS
-"""The rear check as shipped: within 2 m, behind the side beams (docs/perception.md "Walked into from behind")."""
-
-
 def test_a_walker_behind_the_side_beams_within_range_is_on_its_side():
     north = math.pi / 2  # the rover at the origin pointing north: left is west
-    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, REAR) == 1.0
-    assert rear_mover_side([_walker(0.6, -0.5)], 0.0, 0.0, 0.0, north, REAR) == -1.0
-    assert rear_mover_side([_walker(-0.1, -1.5)], 0.0, 0.0, 0.0, north, REAR) == 1.0  # nearly dead astern
-    assert rear_mover_side([_walker(-0.6, -0.5), _walker(0.3, -0.3, ident=2)], 0.0, 0.0, 0.0, north, REAR) == -1.0  # the nearer
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0
+    assert rear_mover_side([_walker(0.6, -0.5)], 0.0, 0.0, 0.0, north, PARAMS) == -1.0
+    assert rear_mover_side([_walker(-0.1, -1.5)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # nearly dead astern
+    assert rear_mover_side([_walker(-0.6, -0.5), _walker(0.3, -0.3, ident=2)], 0.0, 0.0, 0.0, north, PARAMS) == -1.0  # the nearer
     coming = Track(4, -3.0, -0.6, 1.3, 0.0, -0.6, hits=20, last_echo_s=-3.0, born_en=(-0.6, 3.0))  # ahead 3 s ago
-    assert rear_mover_side([coming], 0.0, 0.0, 0.0, north, REAR) == 1.0  # where it is now, not where it was
-    assert rear_mover_side([_walker(-1.0, -1.0, ident=3)], 0.0, 0.0, 0.0, 0.0, REAR) == -1.0  # pointing east: right is south
+    assert rear_mover_side([coming], 0.0, 0.0, 0.0, north, PARAMS) == 1.0  # where it is now, not where it was
+    assert rear_mover_side([_walker(-1.0, -1.0, ident=3)], 0.0, 0.0, 0.0, 0.0, PARAMS) == -1.0  # pointing east: right is south
 
 
 def test_abeam_a_walker_counts_only_when_the_bearing_limit_lets_it():
     north = math.pi / 2
-    bearing = math.radians(REAR.rear_min_bearing_deg)
+    bearing = math.radians(PARAMS.rear_min_bearing_deg)
 
     def at(degrees_off: float) -> Track:  # 1 m from the centre, this far past the bearing limit, on the left
         angle = north + bearing + math.radians(degrees_off)
         return _walker(math.cos(angle), math.sin(angle))
 
-    assert rear_mover_side([at(-5.0)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # still in the side beam's reach
-    assert rear_mover_side([at(5.0)], 0.0, 0.0, 0.0, north, REAR) == 1.0
-    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # abeam
+    assert rear_mover_side([at(-5.0)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # still in the side beam's reach
+    assert rear_mover_side([at(5.0)], 0.0, 0.0, 0.0, north, PARAMS) == 1.0
+    assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # abeam
     assert rear_mover_side([_walker(-0.7, 0.0)], 0.0, 0.0, 0.0, north, SideGuardParams(rear_min_bearing_deg=90.0)) == 1.0
 
 
 def test_no_side_for_a_walker_ahead_far_off_barely_moved_or_with_the_check_off():
     north = math.pi / 2
-    assert rear_mover_side([], 0.0, 0.0, 0.0, north, REAR) == 0.0
-    assert rear_mover_side([_walker(-0.6, 0.3)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # ahead of the centre
-    assert rear_mover_side([_walker(-1.5, -1.5)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # beyond rear_range_m
-    assert rear_mover_side([_walker(-0.6, -0.5, travel_m=0.3)], 0.0, 0.0, 0.0, north, REAR) == 0.0  # a static drum's sliding echo
+    assert rear_mover_side([], 0.0, 0.0, 0.0, north, PARAMS) == 0.0
+    assert rear_mover_side([_walker(-0.6, 0.3)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # ahead of the centre
+    assert rear_mover_side([_walker(-1.5, -1.5)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # beyond rear_range_m
+    assert rear_mover_side([_walker(-0.6, -0.5, travel_m=0.3)], 0.0, 0.0, 0.0, north, PARAMS) == 0.0  # a static drum's sliding echo
     assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(rear_range_m=0.0)) == 0.0
-    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(enabled=False, rear_range_m=2.0)) == 0.0
+    assert rear_mover_side([_walker(-0.6, -0.5)], 0.0, 0.0, 0.0, north, SideGuardParams(enabled=False)) == 0.0
 
 
 def _turn_and_travel_with_a_walker_behind_left(params: SideGuardParams) -> tuple[float, float, set]:
@@ -213,7 +209,7 @@ def test_with_a_walker_behind_the_rover_drives_on_away_from_it_instead_of_pivoti
     """The rule base, its target behind, stops to pivot left, towards a walker converging on the
     rover's left rear quarter where no rangefinder looks (most of the runner's ``head_on`` failures):
     with the walker tracked there the rover goes on at the passing speed and does not turn left."""
-    turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(REAR)
+    turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(PARAMS)
     assert turn <= 1e-9 and travel_m > 1.0 and 1.0 in sides
     turn, travel_m, sides = _turn_and_travel_with_a_walker_behind_left(SideGuardParams(rear_range_m=0.0))
     assert turn > math.radians(90.0) and travel_m < 1.0 and 1.0 not in sides  # without it: the pivot round towards the target

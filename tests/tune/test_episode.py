@@ -32,8 +32,8 @@ from rover_ctl.tuning.scenarios import scenarios
 from rover_ctl.vocabulary import RoverMode
 
 PATH_TOLERANCE = 0.12
-"""Crossing seed 1 (in this test until 2026-11-28) drove 57.91 m and, in a later suite run, 59.79 m in the runner against 54.54 m
-and 54.45 m in SITL (6.2 % and 9.8 %, 2026-11-25): where the rover meets a crossing drum depends
+"""Crossing seed 1 (in this test until 2026-11-28) drove 57.91 m and, in a later suite run,
+59.79 m in the runner against 54.54 m and 54.45 m in SITL (6.2 % and 9.8 %, 2026-11-25): where the rover meets a crossing drum depends
 on the GPS noise of the moment, which differs between the two runs (the SITL run arms on the wall
 clock), and the detour round it with it; the two agreed within 5 % in every earlier run of this
 test. Success and collisions must still agree exactly."""
