@@ -588,11 +588,13 @@ class Daemon:
         """Nothing at all from the vehicle (not even lockstep markers, which would drive the
         control step and its failsafe in vehicle time): step the autopilot on the wall clock, at
         most once a control period, so that its vehicle-link failsafe sends neutral. In lockstep
-        only after ``daemon.lockstep_silence_s``: a starved emulator is paused, not gone."""
+        only after ``daemon.lockstep_silence_s``: a starved emulator is paused, not gone. The
+        silence is measured up to the link's latest poll, not to now: a turn the daemon itself was
+        kept from (a blocking write, the machine's load) is not the vehicle's silence."""
         link = self.link
-        if link.last_rx_wall_s is None:
+        if link.last_rx_wall_s is None or link.last_poll_wall_s is None:
             return
-        age_s = time.monotonic() - max(link.last_rx_wall_s, self._marker_wall_s)
+        age_s = link.last_poll_wall_s - max(link.last_rx_wall_s, self._marker_wall_s)
         timeout_s = self.config.daemon.lockstep_silence_s if self.lockstep else self.config.failsafe.vehicle_timeout_s
         if age_s <= timeout_s or time.monotonic() < self._silent_neutral_wall_s:
             return

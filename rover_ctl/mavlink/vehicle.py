@@ -298,6 +298,10 @@ class VehicleLink:
         self.vehicle: VehicleStatus | None = None
         self.last_rx_wall_s: float | None = None
         """Wall time of the last message from the vehicle (lockstep markers excluded)."""
+        self.last_poll_wall_s: float | None = None
+        """Wall time at the start of the latest poll. Silence is known only up to the last look at
+        the link: a daemon that stalled after it (a slow SD card, a starved core) has not heard
+        silence, whatever the wall clock says, until it reads again."""
         self.last_rx_vehicle_s: float | None = None
         """Vehicle time at the last message from the vehicle (lockstep markers excluded)."""
         self.vehicle_time_s = 0.0
@@ -367,7 +371,8 @@ class VehicleLink:
         """Decoded items received so far (non-blocking). Stops after a lockstep marker when
         ``stop_at_marker`` so that a frame's control step sees exactly that frame's data."""
         items, self._held = self._held, []
-        if self.link_error is not None and self._wall() < self._retry_wall_s:
+        self.last_poll_wall_s = self._wall()
+        if self.link_error is not None and self.last_poll_wall_s < self._retry_wall_s:
             return items
         decoded = reads = 0
         drained = False
