@@ -635,6 +635,16 @@ class EvadeParams:
     see, and the rule base is better at close quarters (0: off)."""
     max_s: float = 6.0
     """Longest manoeuvre (s)."""
+    rejoin_s: float = 6.0
+    """For this long after a manoeuvre (s; 0: off) the rover goes back to its path at a shallow
+    angle, its carrot ``rejoin_lookahead_m`` ahead: the front rangefinder then looks down the path,
+    where more oncoming traffic comes from. Turning straight back (the 3 m carrot, about 30 degrees
+    off the path) put a second walker on the line in the blind wedge between the front beam and the
+    front diagonal until about 1 m out (the runner's ``head_on``: 13 of seeds 1-500 failed, 8 of them
+    struck this way; 5 with this; 8 m for 10 s also 5; 6 m and 10 m for 6 s, 7 and 6)."""
+    rejoin_lookahead_m: float = 8.0
+    """The carrot's distance along the path while rejoining it after a manoeuvre (m), instead of
+    ``planner.lookahead_m``: about 11 degrees off a path 1.5 m away."""
     max_delta_deg: float = 90.0
     """Largest heading offset from the course tried (deg)..."""
     delta_step_deg: float = 15.0

@@ -421,6 +421,8 @@ _DECLARED: tuple[tuple, ...] = (
     ("evasion.side_free_m", "EVD_SIDE_FREE", 0.0, 10.0, RW, {}),
     ("evasion.front_free_m", "EVD_FRONT_FREE", 0.0, 10.0, RW, {}),
     ("evasion.max_s", "EVD_MAX_TIME", 0.1, 120.0, RW, {}),
+    ("evasion.rejoin_s", "EVD_REJOIN_TIME", 0.0, 120.0, RW, {}),
+    ("evasion.rejoin_lookahead_m", "EVD_REJOIN_DIST", 0.5, 50.0, RW, {}),
     ("evasion.max_delta_deg", "EVD_MAX_DELTA", 5.0, 120.0, RW, {"units": "deg"}),
     ("evasion.delta_step_deg", "EVD_DELTA_STEP", 5.0, 90.0, RW, {"units": "deg"}),
     ("evasion.slow_fraction", "EVD_SLOW", 0.0, 1.0, RW, {}),

@@ -162,6 +162,8 @@ class Autopilot:
                                         tracking=lambda: config.yielding.enabled or config.evasion.enabled)  # fmt: skip
         self.yielder = Yielder(config.yielding, lambda: math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0)
         self.evader = Evader(config.evasion, lambda: robot.footprint_width_m / 2.0)
+        self._evaded_s = -math.inf
+        """The last step a manoeuvre of the evader drove (``evasion.rejoin_s`` after it, the rover rejoins its path)."""
         self.obstacle_map = ObstacleMap(config.obstacle_map)
         self._map_updated_s = self._map_handed_s = -math.inf
         self._map_obstacles: tuple = ()  # the persistent obstacles handed to the planner
@@ -540,7 +542,9 @@ class Autopilot:
             row.update(left_set_rpm=rpm, right_set_rpm=rpm)
             return self.wheels.step(t_s, dt_s, rpm, rpm)
         self._update_obstacle_map(t_s, pose, row)
-        guidance = self.follower.update(t_s, (pose.east_m, pose.north_m), goal)
+        evasion = self.config.evasion
+        rejoining = t_s - self._evaded_s < evasion.rejoin_s  # back to the path with the front beam down it
+        guidance = self.follower.update(t_s, (pose.east_m, pose.north_m), goal, evasion.rejoin_lookahead_m if rejoining else None)
         if guidance.replanned and guidance.path is not None and guidance.path.ok:
             self._outbox.append(PlanMade(goal_seq, guidance.path.length_m, tuple(guidance.path.points)))
         if guidance.target_en is None:
@@ -591,6 +595,7 @@ class Autopilot:
                                      may_start=not yielding)  # fmt: skip
             if evade is not None:
                 self.yielder.evaded(t_s)
+                self._evaded_s = t_s
                 row.update(evade_track=evade.track_ident)
                 return self._speed_and_turn(t_s, dt_s, evade.speed_mps, evade.yaw_rate_radps, row)
         else:
@@ -709,6 +714,7 @@ class Autopilot:
             self.follower.reset()
         self.passage.reset()
         self.evader.reset()
+        self._evaded_s = -math.inf
         self.wheels.reset()
         if previous != mode:
             self._outbox.append(ModeChanged(mode, previous, reason))

@@ -729,7 +729,9 @@ class PathFollower:
         """Forget the path (mode change): the next update plans afresh."""
         self.path, self._goal, self._progress_s = None, None, 0.0
 
-    def update(self, now_s: float, position_en: EN, goal_en: EN) -> Guidance:
+    def update(self, now_s: float, position_en: EN, goal_en: EN, lookahead_m: float | None = None) -> Guidance:
+        """The carrot for this step (re-planning first when due); ``lookahead_m`` replaces
+        ``params.lookahead_m`` for this step (the autopilot's rejoin after stepping aside)."""
         goal = (float(goal_en[0]), float(goal_en[1]))
         if self.planner.expire(now_s):
             self._force = True
@@ -753,7 +755,8 @@ class PathFollower:
         path = self.path
         if not path.ok:
             return Guidance(None, 0.0, math.inf, path, replan, path.error)
-        target = path.target(position_en, self._progress_s, self.params.lookahead_m, self.params.max_corner_cut_m)
+        lookahead_m = self.params.lookahead_m if lookahead_m is None else lookahead_m
+        target = path.target(position_en, self._progress_s, lookahead_m, self.params.max_corner_cut_m)
         return Guidance(target, cross_track, path.length_m - self._progress_s, path, replan)
 
     def _project(self, position_en: EN) -> float:
