@@ -639,9 +639,10 @@ class EvadeParams:
     """For this long after a manoeuvre (s; 0: off) the rover goes back to its path at a shallow
     angle, its carrot ``rejoin_lookahead_m`` ahead: the front rangefinder then looks down the path,
     where more oncoming traffic comes from. Turning straight back (the 3 m carrot, about 30 degrees
-    off the path) put a second walker on the line in the blind wedge between the front beam and the
-    front diagonal until about 1 m out (the runner's ``head_on``: 13 of seeds 1-500 failed, 8 of them
-    struck this way; 5 with this; 8 m for 10 s also 5; 6 m and 10 m for 6 s, 7 and 6)."""
+    off the path 1.5 m away) can keep a second walker on the path in the blind wedge between the
+    front beam and a front diagonal: in the runner's ``head_on`` seeds 45 and 351 it was first read
+    1.15 and 1.5 m out, too late. Runner, ``head_on`` seeds 1-500: 13 failed without this, 5 with
+    it (8 m for 10 s: also 5; 6 m and 10 m for 6 s: 7 and 6)."""
     rejoin_lookahead_m: float = 8.0
     """The carrot's distance along the path while rejoining it after a manoeuvre (m), instead of
     ``planner.lookahead_m``: about 11 degrees off a path 1.5 m away."""

@@ -56,6 +56,14 @@ going straight along the course clears it by ``release_margin_m`` more than ``R`
 ``front_free_m``: the rollouts see only the walker, and the rover, stepping aside at full speed,
 drove into a second obstacle its front rangefinder had read closing from 0.66 m (the runner's
 ``head_on`` seed 5); at close quarters the rule base drives.
+
+**Back to the path.** For ``rejoin_s`` after the last step a manoeuvre drove, the autopilot gives
+the navigator a carrot ``rejoin_lookahead_m`` along the path instead of the planner's 3 m, so the
+rover comes back to its path at a shallow angle (about 11 degrees from 1.5 m off it, against about
+30). Walkers come down the path; a second one, hidden behind the first from the front beam, can
+otherwise stay in the blind wedge between the front beam and a front diagonal until it is too late
+(first read 1.15 m out in the runner's ``head_on`` seed 45, and by the front beam 4.15 m out with
+the rejoin: tests/evasion/test_rejoin.py; seeds 1-500: 13 failed turning straight back, 5 with it).
 """
 
 from __future__ import annotations

@@ -302,6 +302,26 @@ def ex_side_guard(d: Daemon) -> list:
     return trace
 
 
+def ex_rejoin(d: Daemon) -> list:
+    """The carrot and the wheels of a rover 1.5 m off its leg north, 1 s, 5.9 s and 8 s after a
+    manoeuvre of the evader: rejoining the path, then not."""
+    from rover_ctl.estimation.readings import RangeReading
+
+    ap, trace = d.autopilot, []
+    clear = FailsafeDecision(Action.NONE, (), (), frozenset(), False, False)
+    for k, since_s in enumerate((1.0, 5.9, 8.0)):
+        t_s = 100.0 * (k + 1)
+        ap.follower.reset()
+        for east_m, north_m in ((0.0, 0.0), (-1.5, 4.0)):  # the path planned from the leg's start, then 1.5 m off it
+            ap._evaded_s = t_s - since_s
+            pose = SimpleNamespace(east_m=east_m, north_m=north_m, heading_rad=math.pi / 2, speed_mps=1.0)
+            ap._ranges = {o: RangeReading(t_s, o, o, 4.0, 0.2, 4.0) for o in (0, 1, 2, 6, 7)}
+            row = dict.fromkeys(LOG_COLUMNS, "")
+            ap._drive(t_s, 0.04, pose, (0.0, 20.0), 1.2, 1, clear, row)
+        trace.append((round(row["target_east_m"], 9), round(row["target_north_m"], 9), round(row["left_set_rpm"], 9), round(row["right_set_rpm"], 9)))
+    return trace
+
+
 def mapping(d: Daemon) -> None:
     """A mission ahead, and the persistent-obstacle map on (whatever the default)."""
     mission_ahead(d)
@@ -537,6 +557,7 @@ EXERCISES = {
     "yielding": (no_mission, ex_yielding, ("yielding.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "yield_switch": (no_mission, ex_yield_switch, ("yielding.enabled",)),
     "evasion": (no_mission, ex_evasion, ("evasion.", "robot.footprint_width_m")),
+    "rejoin": (mission_ahead, ex_rejoin, ("evasion.rejoin_s", "evasion.rejoin_lookahead_m", "planner.lookahead_m")),
     "loop_rate": (no_mission, ex_loop_rate, ("daemon.loop_rate_window_s", "daemon.slow_loop_fraction", "daemon.max_step_travel_m")),
     "obstacle_map": (mapping, ex_obstacle_map, tuple(f"obstacle_map.{f.name}" for f in dataclasses.fields(ObstacleMapParams) if f.name != "enabled")),
     "map_switch": (mission_ahead, ex_map_switch, ("obstacle_map.enabled",)),

@@ -47,3 +47,16 @@ def test_cmac_like_loop_around_an_exclusion_zone():
     assert closest_m > ROBOT.footprint_width_m / 2  # never touched the zone
     assert worst_xt_m < 1.0
     assert math.dist((x, y), (0.0, 0.0)) <= ExecutorParams().rtl_radius_m
+
+
+def test_a_step_may_ask_for_a_longer_carrot_and_the_next_is_back_to_the_planners():
+    """The autopilot's rejoin after stepping aside: the carrot that far along the path for that
+    step only, so the rover 1.5 m off its leg heads back at a shallow angle."""
+    params = PlannerParams()
+    follower = PathFollower(Planner(params, ROBOT), params)
+    follower.update(0.0, (0.0, 0.0), (0.0, 30.0))  # the leg north, planned from its start
+    off = (-1.5, 4.0)
+    far = follower.update(0.1, off, (0.0, 30.0), lookahead_m=8.0).target_en
+    near = follower.update(0.2, off, (0.0, 30.0)).target_en
+    assert far == (0.0, 12.0) and near == (0.0, 4.0 + params.lookahead_m)
+    assert math.degrees(math.atan2(1.5, far[1] - off[1])) < 11.0 < 26.0 < math.degrees(math.atan2(1.5, near[1] - off[1]))
