@@ -479,6 +479,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("passage.stall_m", "GAP_STALL_DIST", 0.0, 1.0, RW, {}),
     ("passage.exit_m", "GAP_EXIT", 0.0, 5.0, RW, {}),
     ("passage.search_m", "GAP_SEARCH", 0.0, 20.0, RW, {}),
+    ("passage.search_speed_mps", "GAP_SEARCH_SPD", 0.05, 2.0, RW, {}),
     ("passage.timeout_s", "GAP_TIMEOUT", 1.0, 600.0, RW, {}),
     ("passage.reject_s", "GAP_REJECT", 0.0, 3600.0, RW, {}),
 )

@@ -44,17 +44,19 @@ before it.
    ``WALL_MIN_SPAN_M`` of travel) and the goal lies beyond that wall, the rover drives on straight
    along it at ``speed_mps`` so that the beam sweeps the opening cleanly. If the sweep proves too
    little but the opening may be wide enough, it sweeps it once more backwards (both passes' free
-   cones count); nothing within ``max_width_m`` (plus ``wall_range_m`` backwards): hand back;
+   cones count); nothing within ``max_width_m`` (plus ``wall_range_m`` backwards), or something
+   in the way (the search's test, below): hand back;
 0'. *search*: the rule base turns one way at a wall across its way (east, in the benchmark's
    worlds), so an opening on the other side, or one passed while it turned (its side beam faces
    the wall only once it is along it), is never swept. When a side beam has followed one flat wall
    that the goal lies beyond for ``search_m`` of travel with no narrow opening proved, the rover
    turns round and drives back along it, on a line parallel to the wall's fitted line at the
-   distance it kept, at ``speed_mps``, the other side beam sweeping, to ``search_m`` beyond where
+   distance it kept, at ``search_speed_mps``, the other side beam sweeping, to ``search_m`` beyond where
    the wall's echoes began. A gap proved on the way is lined up on (an opening that may be wide
    enough gets the inspection's second, backward sweep once); the search ends at its far end, when
    the side beam has been free for more than ``max_width_m`` (the wall's end or a wide opening),
-   when the front beam echoes within ``2 stop_m``, or at ``timeout_s``, and hands back. A wall is
+   when the front beam echoes within ``2 stop_m`` or a front diagonal within ``CORNER_NEAR_M``
+   (as the inspection also does), or at ``timeout_s``, and hands back. A wall is
    searched once per ``reject_s``. A place where the wall merely stopped echoing and an inspection
    found nothing does not hide a gap the search proves there later;
 1. *line up*: turn in place to face ``P0`` (or away from it and reverse, whichever turns less),
@@ -172,6 +174,13 @@ SETTLED_DPS = 2.0
 """Lined up: the heading is taken as settled (the rover coasts several degrees after a turn in
 place is stopped: 5.5 degrees past the gap's axis measured in the emulator) once the gyro reads
 less than this (deg/s)."""
+CORNER_NEAR_M = 0.3
+"""Inspecting or searching: a front diagonal echoing this near (m) hands back to the rule base.
+The diagonal looks 45 degrees off the heading from a front corner; the near edge of its 15 degree
+cone at 0.3 m is 0.24 m ahead and 0.18 m out from the corner, where a turn or a drum's curve meets
+the body. Without it the inspection drove on along the line it chose while a drum beside its nose
+read 0.2 m (the emulator's least) and pushed against it for seconds (in-process runner,
+dense_clutter seeds 33 and 40 with ``passage.enabled``); 0.25 and 0.35 did the same there."""
 FRESH_S = 0.5
 """A gap proved, or a wall seen followed, this recently (s) is acted on; older, it is stale."""
 SEARCH_CHECK_S = 0.5
@@ -610,7 +619,7 @@ class Passage:
         elif self._search_free_from is None:
             self._search_free_from = odo.position_en
         wall_ended = self._search_free_from is not None and math.dist(odo.position_en, self._search_free_from) > p.max_width_m
-        if t_abs <= end or wall_ended or any(r <= 2.0 * p.stop_m for r in front) or time_s - self._since_s > p.timeout_s:
+        if t_abs <= end or wall_ended or self._blocked(front) or time_s - self._since_s > p.timeout_s:
             self._search = None
             self._end(time_s)
             return None
@@ -621,7 +630,7 @@ class Passage:
         error = _wrap(math.atan2(target[1] - odo.north_m, target[0] - odo.east_m) - odo.heading_rad)
         if abs(error) > DRIVE_MAX_ERROR_RAD:
             return self._turn(error)
-        return Drive(p.speed_mps * math.cos(error), self._rate(error), self.state)
+        return Drive(p.search_speed_mps * math.cos(error), self._rate(error), self.state)
 
     def _inspect(
         self,
@@ -642,7 +651,7 @@ class Passage:
         travelled = math.dist(odo.position_en, self._inspect_from)
         if (
             travelled > p.max_width_m + (p.wall_range_m if self._reversing else 0.0)
-            or any(r <= 2.0 * p.stop_m for r in front)
+            or self._blocked(front)
             or time_s - self._since_s > p.timeout_s
         ):
             if self._search is not None and self._reversing:  # a second sweep in vain: the search goes on
@@ -659,6 +668,12 @@ class Passage:
             self._rate(error),
             self.state,
         )
+
+    def _blocked(self, front: list[float]) -> bool:
+        """Inspecting or searching: something in the way ahead (the front beam within ``2 stop_m``)
+        or at a front corner (a diagonal within ``CORNER_NEAR_M``): the rule base steers round it."""
+        p = self.params
+        return any(r <= 2.0 * p.stop_m for r in front) or any(self._diagonal_m.get(o, math.inf) <= CORNER_NEAR_M for o in DIAGONALS)
 
     def gap_leads_to(self, gap: Gap, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
         """The goal lies beyond the gap's line (the goal taken into the odometry frame)."""

@@ -158,7 +158,7 @@ def test_given_up_square_to_the_opening_the_rover_turns_back_along_the_wall(monk
     from rover_ctl.navigation import gaps
 
     monkeypatch.setattr(gaps, "SQUARE_MAX_DEG", -1.0)  # never square enough
-    run, _ = drive_past_gap(PARAMS)
+    run, _ = drive_past_gap(replace(PARAMS, search_m=0.0))  # (no search after: at its end the stand-in for the rule base turns through the wall)
     assert "Narrow passage: given up (not square to the wall)" in run.events
     states = [s for s, *_ in run.trace]
     assert "leave" in states and "pass" not in states
@@ -256,7 +256,7 @@ def test_about_to_touch_the_edge_the_rover_backs_out_and_gives_up(monkeypatch, l
     reads its nearest while the other sees into the opening; the rover stops short, backs out
     straight and hands back, never touching (before the guard, it drove into the post)."""
     _sweep_off(monkeypatch, lateral_m)
-    run, _ = drive_past_gap(replace(PARAMS, scan_max_deg=0.0), blocking=True)
+    run, _ = drive_past_gap(replace(PARAMS, scan_max_deg=0.0, search_m=0.0), blocking=True)  # (no search after: see above)
     assert any(e.startswith(f"Narrow passage: backing out ({near}") for e in run.events)
     assert "Narrow passage: given up (about to touch its edge)" in run.events
     assert run.contacts == 0 and run.min_clearance_m > 0.0
@@ -277,3 +277,35 @@ def test_pushing_against_the_edge_stops_at_once_and_backs_out(monkeypatch):
     assert any(e.startswith("Narrow passage: backing out (") and " m in " in e for e in run.events)
     assert "Narrow passage: given up (about to touch its edge)" in run.events
     assert run.crossing_x(WALL_Y) is None
+
+
+def _clutter_episode(monkeypatch, corner_near_m: float | None):
+    """``dense_clutter`` seed 33 with narrow passages on, in the in-process runner (the emulator's
+    physics and sensors, the daemon's autopilot): an inspection began beside a drum."""
+    from rover_ctl.fuzzy import load_rulebase
+    from rover_ctl.navigation import gaps
+    from rover_ctl.tuning.episode import Episode, episode_config
+
+    if corner_near_m is not None:
+        monkeypatch.setattr(gaps, "CORNER_NEAR_M", corner_near_m)
+    episode = Episode(load_rulebase("default"), "dense_clutter", 33, episode_config(["passage.enabled=1"]), start_s=30.0)
+    states_at_contact: list[str] = []
+    step = episode.rover.step
+
+    def stepped(dt_s):
+        events = step(dt_s)
+        states_at_contact.extend(episode.autopilot.passage.state for e in events if e.kind == "collision")
+        return events
+
+    episode.rover.step = stepped
+    return episode.run(), states_at_contact
+
+
+def test_an_inspection_hands_back_before_its_front_corner_meets_a_drum(monkeypatch):
+    outcome, states = _clutter_episode(monkeypatch, None)
+    assert outcome.success and not states
+
+
+def test_without_the_corner_check_the_inspection_drove_into_the_drum(monkeypatch):
+    outcome, states = _clutter_episode(monkeypatch, 0.0)
+    assert not outcome.success and "inspect" in states
