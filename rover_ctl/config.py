@@ -788,8 +788,9 @@ class PassageParams:
     exit_m: float = 0.3
     """The passage is over when the rover's back is this far (m) beyond the wall's line."""
     search_m: float = 3.0
-    """A wall across the way to the goal that a side beam has followed this far (m) without a
-    narrow opening found is searched back the other way, at ``search_speed_mps``, to this far beyond
+    """A wall across the way to the goal (the straight line to the goal meets its line at most this
+    far ahead) that a side beam has followed this far (m) without a narrow opening found is
+    searched back the other way, at ``search_speed_mps``, to this far beyond
     where its echoes began: the rule base turns one way at a wall (east, in the benchmark), so an
     opening behind it, or passed while it turned, is never swept. 0: never. Costs about
     ``2 search_m / search_speed_mps`` plus two half turns where there is nothing to find."""

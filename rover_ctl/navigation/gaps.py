@@ -49,7 +49,9 @@ before it.
 0'. *search*: the rule base turns one way at a wall across its way (east, in the benchmark's
    worlds), so an opening on the other side, or one passed while it turned (its side beam faces
    the wall only once it is along it), is never swept. When a side beam has followed one flat wall
-   that the goal lies beyond for ``search_m`` of travel with no narrow opening proved, the rover
+   that the goal lies beyond for ``search_m`` of travel with no narrow opening proved, and the
+   straight line to the goal meets the wall's line at most ``search_m`` ahead (farther, the wall
+   runs along the way to the goal, as a cul-de-sac's side does going round it), the rover
    turns round and drives back along it, on a line parallel to the wall's fitted line at the
    distance it kept, at ``search_speed_mps``, the other side beam sweeping, to ``search_m`` beyond where
    the wall's echoes began. A gap proved on the way is lined up on (an opening that may be wide
@@ -535,7 +537,8 @@ class Passage:
         if self.state == "":
             follow, self._follow = self._follow, None
             if follow is not None and time_s - follow[0] <= FRESH_S and not self._was_searched(follow[1], follow[3]) \
-                    and self.gap_leads_to(Gap(follow[1], follow[3], 0.0, 0.0), pose_en, pose_heading_rad, goal_en):  # fmt: skip
+                    and self.gap_leads_to(Gap(follow[1], follow[3], 0.0, 0.0), pose_en, pose_heading_rad, goal_en) \
+                    and self._goal_line_ahead_m(follow, pose_en, pose_heading_rad, goal_en) <= p.search_m:  # fmt: skip
                 self._start_search(time_s, follow)
                 return self._searching(time_s, front, pose_en, pose_heading_rad, goal_en)
             candidate, self._candidate = self._candidate, None
@@ -675,14 +678,30 @@ class Passage:
         p = self.params
         return any(r <= 2.0 * p.stop_m for r in front) or any(self._diagonal_m.get(o, math.inf) <= CORNER_NEAR_M for o in DIAGONALS)
 
-    def gap_leads_to(self, gap: Gap, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
-        """The goal lies beyond the gap's line (the goal taken into the odometry frame)."""
+    def _goal_in_odometry(self, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> EN:
+        """The goal, given in the fused pose's frame, in the odometry's."""
         odo = self.odometry
         turn = odo.heading_rad - pose_heading_rad
         de, dn = goal_en[0] - pose_en[0], goal_en[1] - pose_en[1]
         c, s = math.cos(turn), math.sin(turn)
-        goal = (odo.east_m + c * de - s * dn, odo.north_m + s * de + c * dn)
-        return gap.coordinates(goal)[0] > self.params.standoff_m
+        return (odo.east_m + c * de - s * dn, odo.north_m + s * de + c * dn)
+
+    def _goal_line_ahead_m(self, follow: tuple[float, EN, EN, EN, float], pose_en: EN, pose_heading_rad: float, goal_en: EN) -> float:
+        """How far ahead along a followed wall (m, the way the rover follows it) the straight line
+        from the rover to the goal meets the wall's line (-inf where it does not)."""
+        _, base, along, normal, _ = follow
+        odo = self.odometry
+        goal = self._goal_in_odometry(pose_en, pose_heading_rad, goal_en)
+        here_n = (odo.east_m - base[0]) * normal[0] + (odo.north_m - base[1]) * normal[1]
+        goal_n = (goal[0] - base[0]) * normal[0] + (goal[1] - base[1]) * normal[1]
+        if here_n * goal_n >= 0.0:
+            return -math.inf
+        k = here_n / (here_n - goal_n)
+        return k * ((goal[0] - odo.east_m) * along[0] + (goal[1] - odo.north_m) * along[1])
+
+    def gap_leads_to(self, gap: Gap, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
+        """The goal lies beyond the gap's line (the goal taken into the odometry frame)."""
+        return gap.coordinates(self._goal_in_odometry(pose_en, pose_heading_rad, goal_en))[0] > self.params.standoff_m
 
     def _give_up(self, time_s: float, why: str, leave: bool = False) -> None:
         """Hand back to the rule base; with ``leave``, after turning back along the wall."""

@@ -93,18 +93,18 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
                    start: tuple[float, float, float] = (-2.0, 1.9, 0.0), cruise_mps: float = 0.5, t0_s: float = 0.0,
                    duration_s: float = 40.0, behind_m: float | None = None, passage: Passage | None = None,
                    pose_drift_mps: float = 0.0, seed: int = 0, yaw_lag_s: float = 0.0,
-                   blocking: bool = False, side_lead_m: float = 0.0) -> tuple[Run, Passage]:  # fmt: skip
+                   blocking: bool = False, side_lead_m: float = 0.0, goal: tuple[float, float] | None = None) -> tuple[Run, Passage]:  # fmt: skip
     """Drive the scene; ``pose_drift_mps``: the pose given as 'fused' drifts from the truth this
     fast; ``side_lead_m``: the side rangefinders read from this far ahead of where they are (as
     if the pose they are placed with lagged the reading), so that the gap a sweep finds is off
-    its true place along the wall by about as much."""
+    its true place along the wall by about as much; ``goal``: 10 m beyond the opening unless given."""
     rng, drift_rng = np.random.default_rng(seed), np.random.default_rng(seed + 1)
     passage = passage or Passage(params, lambda: LENGTH, lambda: WIDTH)
     boxes = _walls(gap_x, gap_m, wall_y, behind_m)
     shapes = [box(*b) for b in boxes]
     x, y, h = start
     left = right = 0.0
-    goal = (gap_x, wall_y + 10.0)
+    goal = goal or (gap_x, wall_y + 10.0)
     run, dt, through = Run(), 0.04, False
     drift = np.zeros(2)
     yaw_rate = 0.0

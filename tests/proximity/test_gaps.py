@@ -190,6 +190,16 @@ def test_a_search_that_finds_nothing_ends_search_m_beyond_where_the_wall_began_a
     assert run.min_clearance_m > 0.05
 
 
+def test_a_wall_along_the_way_to_the_goal_is_not_searched_back():
+    """Going round a cul-de-sac, the rover followed its outer side towards the goal, which lay
+    beyond that wall's line but well ahead along it: searching it back cost 10 s and 9 m for
+    nothing (in-process runner, cul_de_sac seed 1). The straight line to the goal meets this wall's
+    line about 11 m ahead: no search. Ahead within ``search_m``, as in the test above: searched."""
+    run, _ = drive_past_gap(PARAMS, gap_x=0.0, gap_m=0.0, start=(-2.0, 1.9, 0.0), duration_s=40.0, goal=(30.0, 5.0))
+    assert "Narrow passage: searching the wall back the other way" not in run.events
+    assert run.path[-1][0] > 10.0
+
+
 def test_a_rover_that_coasts_on_after_turning_in_place_looks_only_once_settled():
     """The emulator's rover turned on 5.5 degrees past the gap's axis after the turn was stopped,
     the diagonals then read unalike and the gap was given up (narrow_gap worlds 1, 11, 17). With a
