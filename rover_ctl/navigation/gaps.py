@@ -57,8 +57,9 @@ before it.
    the wall's echoes began. A gap proved on the way is lined up on (an opening that may be wide
    enough gets the inspection's second, backward sweep once); the search ends at its far end, when
    the side beam has been free for more than ``max_width_m`` (the wall's end or a wide opening),
-   when the front beam echoes within ``2 stop_m`` or a front diagonal within ``CORNER_NEAR_M``
-   (as the inspection also does), or at ``timeout_s``, and hands back. A wall is
+   when the front beam echoes within ``2 stop_m``, a front diagonal within ``CORNER_NEAR_M`` or a
+   side or the back within ``SIDE_NEAR_M`` (as the inspection also does), or at ``timeout_s``,
+   and hands back. A wall is
    searched once per ``reject_s``. A place where the wall merely stopped echoing and an inspection
    found nothing does not hide a gap the search proves there later;
 1. *line up*: turn in place to face ``P0`` (or away from it and reverse, whichever turns less),
@@ -127,7 +128,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rover_ctl.config import PassageParams
-from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
+from rover_ctl.navigation.sensors import BACK, FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
 
 EN = tuple[float, float]
 
@@ -183,6 +184,13 @@ cone at 0.3 m is 0.24 m ahead and 0.18 m out from the corner, where a turn or a 
 the body. Without it the inspection drove on along the line it chose while a drum beside its nose
 read 0.2 m (the emulator's least) and pushed against it for seconds (in-process runner,
 dense_clutter seeds 33 and 40 with ``passage.enabled``); 0.25 and 0.35 did the same there."""
+SIDE_NEAR_M = 0.45
+"""Inspecting or searching: a side or the back rangefinder echoing this near (m) hands back to the
+rule base and the guards around it, which the passage bypasses while it drives. A followed wall
+reads 0.72 m or more from the side beams then (in-process runner, narrow_gap seeds 1-20); what
+comes nearer is moving at the rover: a drum crossing at 0.5 m/s, taken for a wall's end by the side
+beam, caught up with the slow inspection from the side or from behind (moving seeds 30, 35, 91, 94
+with ``passage.enabled``: 4 of 100 struck; none of 300 with this)."""
 FRESH_S = 0.5
 """A gap proved, or a wall seen followed, this recently (s) is acted on; older, it is stale."""
 SEARCH_CHECK_S = 0.5
@@ -377,6 +385,7 @@ class Passage:
         self._sweeps: dict[int, deque[Beam]] = {o: deque() for o in SIDE_BODY_RAD}
         self._front: list[float] = []
         self._diagonal_m: dict[int, float] = {}
+        self._flank_m: dict[int, float] = {}  # the sides' and the back's latest readings
         self._diagonals: dict[int, deque[float]] = {o: deque(maxlen=GUARD_READINGS) for o in DIAGONALS}
         self._look_diagonals: dict[int, list[float]] = {o: [] for o in DIAGONALS}  # looking: every reading since it began
         self._rejected: list[tuple[float, EN, bool]] = []  # (until when, centre, a gap proved there)
@@ -435,6 +444,8 @@ class Passage:
             if self.state == "look":
                 self._look_diagonals[orientation].append(range_m)
             return
+        if orientation == BACK or orientation in SIDE_BODY_RAD:
+            self._flank_m[orientation] = range_m
         if orientation not in SIDE_BODY_RAD:
             return
         left = math.copysign(self._width_m() / 2.0, SIDE_BODY_RAD[orientation])
@@ -673,10 +684,12 @@ class Passage:
         )
 
     def _blocked(self, front: list[float]) -> bool:
-        """Inspecting or searching: something in the way ahead (the front beam within ``2 stop_m``)
-        or at a front corner (a diagonal within ``CORNER_NEAR_M``): the rule base steers round it."""
+        """Inspecting or searching: something in the way ahead (the front beam within ``2 stop_m``),
+        at a front corner (a diagonal within ``CORNER_NEAR_M``) or closing on a side or the back
+        (within ``SIDE_NEAR_M``): the rule base and the guards take over."""
         p = self.params
-        return any(r <= 2.0 * p.stop_m for r in front) or any(self._diagonal_m.get(o, math.inf) <= CORNER_NEAR_M for o in DIAGONALS)
+        return (any(r <= 2.0 * p.stop_m for r in front) or any(self._diagonal_m.get(o, math.inf) <= CORNER_NEAR_M for o in DIAGONALS)
+                or any(r <= SIDE_NEAR_M for r in self._flank_m.values()))
 
     def _goal_in_odometry(self, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> EN:
         """The goal, given in the fused pose's frame, in the odometry's."""

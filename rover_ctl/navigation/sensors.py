@@ -33,7 +33,7 @@ from rover_ctl.vocabulary import mav
 ORIENTATION_NAMES = {0: "front", 1: "front_right", 2: "right", 3: "back_right", 4: "back", 5: "back_left", 6: "left", 7: "front_left"}
 """MAV_SENSOR_ORIENTATION yaw steps (45 deg clockwise each) as the rule bases name them."""
 FRONT, FRONT_RIGHT, RIGHT = mav.MAV_SENSOR_ROTATION_NONE, mav.MAV_SENSOR_ROTATION_YAW_45, mav.MAV_SENSOR_ROTATION_YAW_90
-LEFT, FRONT_LEFT = mav.MAV_SENSOR_ROTATION_YAW_270, mav.MAV_SENSOR_ROTATION_YAW_315
+BACK, LEFT, FRONT_LEFT = mav.MAV_SENSOR_ROTATION_YAW_180, mav.MAV_SENSOR_ROTATION_YAW_270, mav.MAV_SENSOR_ROTATION_YAW_315
 """The orientations the navigation modules read by name (the guards, the evader, passages)."""
 DIAGONAL_NEIGHBOURS = {FRONT_RIGHT: (FRONT, RIGHT), FRONT_LEFT: (FRONT, LEFT)}
 """A missing diagonal is read from the nearer of these two (front and its side)."""

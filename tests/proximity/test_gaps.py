@@ -289,16 +289,17 @@ def test_pushing_against_the_edge_stops_at_once_and_backs_out(monkeypatch):
     assert run.crossing_x(WALL_Y) is None
 
 
-def _clutter_episode(monkeypatch, corner_near_m: float | None):
-    """``dense_clutter`` seed 33 with narrow passages on, in the in-process runner (the emulator's
-    physics and sensors, the daemon's autopilot): an inspection began beside a drum."""
+def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
+    """An episode with narrow passages on, in the in-process runner (the emulator's physics and
+    sensors, the daemon's autopilot), ``constants`` of the passage module replaced; its outcome and
+    the passage's state at each contact."""
     from rover_ctl.fuzzy import load_rulebase
     from rover_ctl.navigation import gaps
     from rover_ctl.tuning.episode import Episode, episode_config
 
-    if corner_near_m is not None:
-        monkeypatch.setattr(gaps, "CORNER_NEAR_M", corner_near_m)
-    episode = Episode(load_rulebase("default"), "dense_clutter", 33, episode_config(["passage.enabled=1"]), start_s=30.0)
+    for name, value in constants.items():
+        monkeypatch.setattr(gaps, name, value)
+    episode = Episode(load_rulebase("default"), scenario, seed, episode_config(["passage.enabled=1"]), start_s=30.0)
     states_at_contact: list[str] = []
     step = episode.rover.step
 
@@ -312,10 +313,19 @@ def _clutter_episode(monkeypatch, corner_near_m: float | None):
 
 
 def test_an_inspection_hands_back_before_its_front_corner_meets_a_drum(monkeypatch):
-    outcome, states = _clutter_episode(monkeypatch, None)
+    """dense_clutter seed 33: an inspection began beside a drum; without the corner check it drove
+    on along its line into the drum."""
+    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33)
     assert outcome.success and not states
+    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33, CORNER_NEAR_M=0.0)
+    assert not outcome.success and "inspect" in states
 
 
-def test_without_the_corner_check_the_inspection_drove_into_the_drum(monkeypatch):
-    outcome, states = _clutter_episode(monkeypatch, 0.0)
+@pytest.mark.parametrize("seed", [30, 35])
+def test_an_inspection_hands_back_when_a_mover_closes_on_its_side_or_back(monkeypatch, seed):
+    """moving seeds 30 and 35: the crossing drum's face, taken for a wall's end, started a slow
+    inspection that the drum then caught up with, from the side (30) or from behind (35)."""
+    outcome, states = _runner_episode(monkeypatch, "moving", seed)
+    assert outcome.success and not states
+    outcome, states = _runner_episode(monkeypatch, "moving", seed, SIDE_NEAR_M=0.0)
     assert not outcome.success and "inspect" in states
