@@ -208,6 +208,12 @@ class FailsafeParams:
     """How long to back off when stuck, before a re-plan."""
     back_off_speed_mps: float = 0.3
     """Reverse speed while backing off (the daemon drives it)."""
+    back_off_clear_m: float = 0.3
+    """Backing off stops short, the wheels held for the rest of ``back_off_s``, while the back
+    rangefinder reads within this (m); 0: back off blind. Blind, a rover stuck turning in a
+    cul-de-sac's corner backed into the wall behind it (in-process runner, cul_de_sac seed 97 with
+    the persistent-obstacle map on: the back beam read 0.68 m as the back-off began, 0.2 m at the
+    contact)."""
     stuck_max_tries: int = 3
     """Back-offs before giving up and holding."""
     stuck_clear_m: float = 3.0

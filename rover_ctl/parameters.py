@@ -270,6 +270,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("failsafe.parked_window_s", "FS_PARKED_TIME", 0.0, 600.0, RW, {}),
     ("failsafe.back_off_s", "FS_BACKOFF_TIME", 0.0, 60.0, RW, {}),
     ("failsafe.back_off_speed_mps", "FS_BACKOFF_SPEED", 0.0, 5.0, RW, {}),
+    ("failsafe.back_off_clear_m", "FS_BACKOFF_CLEAR", 0.0, 5.0, RW, {}),
     ("failsafe.stuck_max_tries", "FS_STUCK_TRIES", 0, 100, RW, {}),
     ("failsafe.stuck_clear_m", "FS_STUCK_CLEAR", 0.0, 100.0, RW, {}),
     ("estimator.gyro_noise_rad_per_sqrt_s", "EKF_GYRO_NSE", 1e-6, 1.0, RW, {}),

@@ -61,7 +61,7 @@ from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.side_guard import AHEAD, against_guard_removed, pass_speed_mps, rear_mover_side, side_turn_radps, way_ahead_clear
 from rover_ctl.navigation.yielding import Yielder, keep_line
-from rover_ctl.navigation.sensors import RangefinderPlan, SensorSetupError, plan_rangefinders
+from rover_ctl.navigation.sensors import BACK, RangefinderPlan, SensorSetupError, plan_rangefinders
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
 
@@ -538,7 +538,9 @@ class Autopilot:
         """Planner -> carrot -> obstacle memory -> fuzzy navigator -> wheel PI, towards ``goal``."""
         row.update(goal_east_m=goal[0], goal_north_m=goal[1])
         if decision.action == Action.BACK_OFF:
-            rpm = -self._speed_to_rpm(self.config.failsafe.back_off_speed_mps)
+            back = self._ranges.get(BACK)
+            fs = self.config.failsafe
+            rpm = 0.0 if back is not None and back.range_m <= fs.back_off_clear_m else -self._speed_to_rpm(fs.back_off_speed_mps)
             row.update(left_set_rpm=rpm, right_set_rpm=rpm)
             return self.wheels.step(t_s, dt_s, rpm, rpm)
         self._update_obstacle_map(t_s, pose, row)

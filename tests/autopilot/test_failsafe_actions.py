@@ -183,6 +183,25 @@ def test_stuck_backs_off_then_replans_around_the_spot_ahead():
     assert len(plans[-1].path_en) > 2  # the new path goes around it
 
 
+def test_backing_off_stops_short_of_something_behind():
+    """Backing off blind drove a rover stuck in a cul-de-sac's corner into the wall behind it
+    (in-process runner, cul_de_sac seed 97 with the map on): with the back rangefinder within
+    ``back_off_clear_m`` the wheels are held instead."""
+    bench = driving(points=((0.0, 40.0),))
+    bench.frozen = True
+    assert bench.run(10.0, until=lambda b: b.autopilot.decision.action == Action.BACK_OFF)
+    out = bench.step()
+    assert out.log_row["left_set_rpm"] < 0 and out.log_row["right_set_rpm"] < 0  # nothing behind: reversing
+    bench.ranges_m[4] = 0.25  # something 0.25 m behind
+    bench.step()
+    out = bench.step()
+    assert bench.autopilot.decision.action == Action.BACK_OFF
+    assert out.log_row["left_set_rpm"] == 0.0 and out.log_row["right_set_rpm"] == 0.0
+    bench.autopilot.config.failsafe.back_off_clear_m = 0.0  # 0: back off blind
+    out = bench.step()
+    assert out.log_row["left_set_rpm"] < 0 and out.log_row["right_set_rpm"] < 0
+
+
 def test_stuck_gives_up_and_holds_after_its_tries():
     config = rover_config()
     config.failsafe.stuck_max_tries = 1

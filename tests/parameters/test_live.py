@@ -27,9 +27,10 @@ from estimator.synthetic import CMAC, Sensors, simulate
 import rover_ctl.app.daemon as daemon_module
 from rover_ctl.app.daemon import Daemon
 from rover_ctl.config import Config, ObstacleMapParams
-from rover_ctl.estimation.readings import Attitude, GpsFix, WheelDistance
+from rover_ctl.estimation.readings import Attitude, GpsFix, RangeReading, WheelDistance
 from rover_ctl.mavlink.params import ConfigParams
 from rover_ctl.mission.model import Mission, MissionItem
+from rover_ctl.navigation.sensors import BACK
 from rover_ctl.navigation.tracks import Track
 from rover_ctl.autopilot import prearm
 from rover_ctl.autopilot.autopilot import LOG_COLUMNS
@@ -452,7 +453,8 @@ def ex_estimator(d: Daemon) -> list:
 
 
 def ex_daemon(d: Daemon) -> list:
-    """The loop period, the hold's braking threshold and the back-off speed."""
+    """The loop period, the hold's braking threshold, the back-off speed and its stop short of
+    something behind."""
     steps: list = []
     d.link = SimpleNamespace(last_rx_vehicle_s=None)
     d.control_step = lambda t_s, vehicle_age_s: steps.append(round(t_s, 6))
@@ -467,7 +469,9 @@ def ex_daemon(d: Daemon) -> list:
     pose = SimpleNamespace(east_m=0.0, north_m=0.0, heading_rad=1.57, speed_mps=0.0)
     back_off = FailsafeDecision(Action.BACK_OFF, ("stuck",), (), frozenset(), False, False, 1)
     command = ap._decide(0.04, 0.04, pose, back_off, dict.fromkeys(LOG_COLUMNS, ""))
-    return [steps, [dataclasses.astuple(h) for h in holds], dataclasses.astuple(command)]
+    ap._ranges[BACK] = RangeReading(0.04, 4, BACK, 0.2, 0.2, 4.0)  # something behind
+    held = ap._decide(0.08, 0.04, pose, back_off, dict.fromkeys(LOG_COLUMNS, ""))
+    return [steps, [dataclasses.astuple(h) for h in holds], dataclasses.astuple(command), dataclasses.astuple(held)]
 
 
 def ex_loop_rate(d: Daemon) -> list:
@@ -550,7 +554,7 @@ EXERCISES = {
     "planner": (mission_for_planner, ex_planner, ("planner.", "robot.footprint_width_m")),
     "passage": (no_mission, ex_passage, ("passage.", "robot.footprint_length_m", "robot.footprint_width_m")),
     "estimator": (home_only, ex_estimator, ("estimator.", "robot.track_m")),
-    "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps")),
+    "daemon": (mission_ahead, ex_daemon, ("daemon.", "failsafe.back_off_speed_mps", "failsafe.back_off_clear_m")),
     "autopilot": (two_ahead, ex_autopilot, ("autopilot.",)),
     "link": (no_mission, ex_link, ("link.radio_txbuf_low_pct", "link.override_min_hz", "link.health_period_s", "link.rate_window_s",
                                    "link.radio_status_timeout_s")),
