@@ -562,8 +562,13 @@ class Autopilot:
                     self.obstacle_map.add(reading.time_s, *sensor, reading.range_m, reading.max_range_m, ident)
                 if self.config.passage.enabled:
                     self.passage.on_range(reading.time_s, orientation, reading.range_m)
+        tracking = self.config.yielding.enabled or self.config.evasion.enabled
+        if tracking:
+            rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
+            tracks = self.proximity.tracker.moving(t_s, rover_velocity)
         if self.config.passage.enabled:  # a narrow passage: the manoeuvre drives, the rule base waits
-            drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal)
+            # (it hands back when a mover comes near: the yielder and the evader need the tracks)
+            drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal, tracks if tracking else ())
             for text in self.passage.events:
                 self._say(text)
             self.passage.events.clear()
@@ -583,10 +588,6 @@ class Autopilot:
             speed_mps = min(speed_mps, self._loop.speed_limit_mps)
             row.update(speed_limit_mps=speed_mps)
         course = math.atan2(guidance.target_en[1] - pose.north_m, guidance.target_en[0] - pose.east_m)
-        tracking = self.config.yielding.enabled or self.config.evasion.enabled
-        if tracking:
-            rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
-            tracks = self.proximity.tracker.moving(t_s, rover_velocity)
         yielding = False
         if self.config.yielding.enabled:  # crossing traffic: slow or stop on the path and let it pass
             alive = {track.ident for track in self.proximity.tracker.tracks}

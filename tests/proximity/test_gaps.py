@@ -314,18 +314,31 @@ def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
 
 def test_an_inspection_hands_back_before_its_front_corner_meets_a_drum(monkeypatch):
     """dense_clutter seed 33: an inspection began beside a drum; without the corner check it drove
-    on along its line into the drum."""
+    on along its line into the drum. (The moving-track check alone now hands back there too, on the
+    drum's echoes' track: both are off for the second run.)"""
     outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33)
     assert outcome.success and not states
-    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33, CORNER_NEAR_M=0.0)
+    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33, CORNER_NEAR_M=0.0, MOVER_NEAR_M=0.0)  # (a drum's echoes make tracks)
     assert not outcome.success and "inspect" in states
 
 
 @pytest.mark.parametrize("seed", [30, 35])
 def test_an_inspection_hands_back_when_a_mover_closes_on_its_side_or_back(monkeypatch, seed):
     """moving seeds 30 and 35: the crossing drum's face, taken for a wall's end, started a slow
-    inspection that the drum then caught up with, from the side (30) or from behind (35)."""
+    inspection that the drum then caught up with, from the side (30) or from behind (35). (The
+    moving-track check alone now hands back there too: both are off for the second run.)"""
     outcome, states = _runner_episode(monkeypatch, "moving", seed)
     assert outcome.success and not states
-    outcome, states = _runner_episode(monkeypatch, "moving", seed, SIDE_NEAR_M=0.0)
+    outcome, states = _runner_episode(monkeypatch, "moving", seed, SIDE_NEAR_M=0.0, MOVER_NEAR_M=0.0)
+    assert not outcome.success and "inspect" in states
+
+
+@pytest.mark.parametrize("seed", [258, 287])
+def test_an_inspection_hands_back_when_a_moving_track_comes_near(monkeypatch, seed):
+    """crossing seeds 258 and 287: a drum crossing the leg, its echoes taken for a wall's end,
+    walked into the slow inspection from where no side or back beam looked; its track had come
+    within 0.51-0.56 m."""
+    outcome, states = _runner_episode(monkeypatch, "crossing", seed)
+    assert outcome.success and not states
+    outcome, states = _runner_episode(monkeypatch, "crossing", seed, MOVER_NEAR_M=0.0)
     assert not outcome.success and "inspect" in states
