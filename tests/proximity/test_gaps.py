@@ -315,10 +315,11 @@ def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
 def test_an_inspection_hands_back_before_its_front_corner_meets_a_drum(monkeypatch):
     """dense_clutter seed 33: an inspection began beside a drum; without the corner check it drove
     on along its line into the drum. (The moving-track check alone now hands back there too, on the
-    drum's echoes' track: both are off for the second run.)"""
-    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33)
+    drum's echoes' track: both are off for the second run. A drum's face is no longer taken for a
+    wall since ``WALL_MIN_SPAN_M`` is 1 m: both runs take it as they did at 0.6.)"""
+    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33, WALL_MIN_SPAN_M=0.6)
     assert outcome.success and not states
-    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33, CORNER_NEAR_M=0.0, MOVER_NEAR_M=0.0)  # (a drum's echoes make tracks)
+    outcome, states = _runner_episode(monkeypatch, "dense_clutter", 33, WALL_MIN_SPAN_M=0.6, CORNER_NEAR_M=0.0, MOVER_NEAR_M=0.0)
     assert not outcome.success and "inspect" in states
 
 
