@@ -445,6 +445,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("obstacle_map.max_score", "OMAP_MAX_SCORE", 1.0, 1000.0, RW, {}),
     ("obstacle_map.persist_score", "OMAP_PERSIST", 1.0, 1000.0, RW, {}),
     ("obstacle_map.min_span_s", "OMAP_MIN_SPAN", 0.0, 600.0, RW, {}),
+    ("obstacle_map.free_memory_s", "OMAP_FREE_MEM", 0.0, 60.0, RW, {}),
     ("obstacle_map.ttl_s", "OMAP_TTL", 0.1, 86400.0, RW, {}),
     ("obstacle_map.max_cells", "OMAP_MAX_CELLS", 1, 100000, RW, {}),
     ("obstacle_map.update_period_s", "OMAP_UPD_PERIOD", 0.02, 60.0, RW, {}),

@@ -28,7 +28,10 @@ in front of the surface's cell. A cell is **persistent** when
     e >= persist_score   and   last echo - first echo >= min_span_s
 
 (seen repeatedly, over a time span: an obstacle walking through a cell at 0.5 m/s or more gives
-it echoes over less than ``min_span_s``). Echoes of the tracks the rover yields to
+it echoes over less than ``min_span_s``). An echo in a cell that some beam's free stretch passed
+less than ``free_memory_s`` before adds nothing: something moved into a place seen empty, as a
+drum crossing a stopped rover's front beam does, its echo standing still on the beam's axis for
+the whole crossing (longer than ``min_span_s``). Echoes of the tracks the rover yields to
 (``rover_ctl.navigation.yielding``: the obstacle memory returns the track each echo joined, the
 autopilot passes the yielded-to ones to ``update``) are dropped, so crossing traffic is yielded
 to, not planned around. The tracker's plain *moving* label is not used: an echo sliding over a
@@ -98,6 +101,7 @@ class ObstacleMap:
         self.cells: dict[Key, Cell] = {}
         self._beams: list[tuple[float, float, float, float, float, float, int]] = []
         self._persistent: set[Key] = set()
+        self._free_s: dict[Key, float] = {}  # when a beam last saw each cell free (within free_memory_s)
         self._handed: set[Key] = set()
         self._cell_m = params.cell_m
 
@@ -124,14 +128,19 @@ class ObstacleMap:
         if beams:
             self._misses(beams)
             self._hits([b for b in beams if math.isfinite(b[4]) and b[4] <= b[5] and b[6] not in moving_idents])
+        if p.free_memory_s > 0.0:
+            self._free_s = {k: t for k, t in self._free_s.items() if time_s - t <= p.free_memory_s}
         self._forget(time_s, rover_en, body_radius_m)
         self._persistent = {k for k, c in self.cells.items() if c.score >= p.persist_score and c.last_s - c.first_s >= p.min_span_s}
         return len(self._persistent ^ self._handed)
 
     def _hits(self, beams: list) -> None:
         p, cell = self.params, self._cell_m
+        memory_s, free_s = p.free_memory_s, self._free_s
         for time_s, e, n, axis, range_m, _, _ in beams:
             key = (math.floor((e + range_m * math.cos(axis)) / cell), math.floor((n + range_m * math.sin(axis)) / cell))
+            if memory_s > 0.0 and 0.0 < time_s - free_s.get(key, -math.inf) <= memory_s:
+                continue  # seen free just before: something moved in, not a place to plan around
             c = self.cells.get(key)
             if c is None:
                 self.cells[key] = Cell(min(1.0, p.max_score), time_s, time_s)
@@ -140,8 +149,10 @@ class ObstacleMap:
                 c.first_s, c.last_s = min(c.first_s, time_s), max(c.last_s, time_s)
 
     def _misses(self, beams: list) -> None:
-        """One miss per reading for each existing cell its free stretch passes (vectorised)."""
-        if not self.cells:
+        """One miss per reading for each existing cell its free stretch passes (vectorised); and
+        when each cell was last seen free."""
+        memory_s = self.params.free_memory_s
+        if not self.cells and memory_s <= 0.0:
             return
         cell = self._cell_m
         data = np.array([b[1:6] for b in beams])
@@ -158,10 +169,14 @@ class ObstacleMap:
         beam = np.broadcast_to(np.arange(len(beams))[:, None], ix.shape)
         rows = np.unique(np.stack([beam[inside], ix[inside], iy[inside]], axis=1), axis=0)  # one miss per beam and cell
         miss = self.params.miss_score
-        for _, i, j in rows.tolist():
+        times = [b[0] for b in beams]
+        free_s = self._free_s
+        for b, i, j in rows.tolist():
             c = self.cells.get((i, j))
             if c is not None:
                 c.score -= miss
+            if memory_s > 0.0 and free_s.get((i, j), -math.inf) < times[b]:
+                free_s[(i, j)] = times[b]
 
     def _forget(self, time_s: float, rover_en: EN, body_radius_m: float) -> None:
         p, cell = self.params, self._cell_m

@@ -138,3 +138,45 @@ def test_the_rover_is_never_inside_a_persistent_obstacle(east, north, heading, e
     for polygon in m.obstacles((east, north)):
         assert not Polygon(polygon).contains(Point(east, north))
         assert Polygon(polygon).distance(Point(east, north)) >= BODY_M - PARAMS.simplify_m - PARAMS.cell_m * JOIN_FRACTION - 1e-9
+
+
+def test_an_echo_where_a_beam_just_saw_free_space_adds_no_evidence():
+    """A drum crossing a stopped rover's front beam: the beam saw the place free, then the drum's
+    echo stood on the axis for 2 s. Something moved in: not a place to plan around, unless
+    ``free_memory_s`` is 0 (the rule off)."""
+    for memory_s, persistent in ((PARAMS.free_memory_s, False), (0.0, True)):
+        m = ObstacleMap(replace(PARAMS, free_memory_s=memory_s))
+        for k in range(10):  # half a second of nothing within 4 m
+            m.add(k * 0.05, 0.0, 0.0, math.pi / 2, math.inf, MAX_RANGE_M)
+        m.update(0.5, (0.0, 0.0), BODY_M)
+        for k in range(40):  # then 2 s of echoes 2 m ahead
+            m.add(0.5 + k * 0.05, 0.0, 0.0, math.pi / 2, 2.0, MAX_RANGE_M)
+        m.update(2.5, (0.0, 0.0), BODY_M)
+        assert bool(m.persistent) is persistent, memory_s
+
+
+def test_a_wall_seen_free_long_before_is_persistent_again():
+    """The rule forgets: after ``free_memory_s`` the echoes count (a parked cart becomes an obstacle)."""
+    m = ObstacleMap(PARAMS)
+    m.add(0.0, 0.0, 0.0, math.pi / 2, math.inf, MAX_RANGE_M)
+    m.update(0.0, (0.0, 0.0), BODY_M)
+    for k in range(80):
+        m.add(PARAMS.free_memory_s + 0.1 + k * 0.05, 0.0, 0.0, math.pi / 2, 2.0, MAX_RANGE_M)
+    m.update(PARAMS.free_memory_s + 4.2, (0.0, 0.0), BODY_M)
+    assert m.persistent
+
+
+def test_a_drum_crossing_a_stopped_rovers_beam_is_not_planned_around():
+    """In-process runner, moving seed 93 with the map on: the rover stopped to let the crossing drum
+    pass; the drum's echo stood still on the front beam's axis for 1.8 s (a track of its own, not
+    the one yielded to), the cell became persistent and the re-plan around it led the rover into
+    the walker coming down the leg. With the free-space rule it is never persistent."""
+    from rover_ctl.fuzzy import load_rulebase
+    from rover_ctl.tuning.episode import Episode, episode_config
+
+    def run(memory_s: float):
+        config = episode_config(["obstacle_map.enabled=1", f"obstacle_map.free_memory_s={memory_s}"])
+        return Episode(load_rulebase("default"), "moving", 93, config, start_s=30.0).run()
+
+    assert run(PARAMS.free_memory_s).success
+    assert not run(0.0).success
