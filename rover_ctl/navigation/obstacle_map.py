@@ -123,13 +123,13 @@ class ObstacleMap:
         p = self.params
         if p.cell_m != self._cell_m:  # a new cell size: the old cells mean nothing
             self.cells.clear()
+            self._free_s.clear()
             self._cell_m = p.cell_m
         beams, self._beams = self._beams, []
         if beams:
             self._misses(beams)
             self._hits([b for b in beams if math.isfinite(b[4]) and b[4] <= b[5] and b[6] not in moving_idents])
-        if p.free_memory_s > 0.0:
-            self._free_s = {k: t for k, t in self._free_s.items() if time_s - t <= p.free_memory_s}
+        self._free_s = {k: t for k, t in self._free_s.items() if time_s - t <= p.free_memory_s}
         self._forget(time_s, rover_en, body_radius_m)
         self._persistent = {k for k, c in self.cells.items() if c.score >= p.persist_score and c.last_s - c.first_s >= p.min_span_s}
         return len(self._persistent ^ self._handed)
