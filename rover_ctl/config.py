@@ -838,7 +838,7 @@ class ObstacleMapParams:
     mission met its looping walker in a way that ended in a collision in 3 of 18 runs (1 of 15
     off: yielding's failure against a pacing walker, which the map makes likelier or not;
     docs/perception.md). Re-run 2026-11-28 with narrow passages on as well, lockstep, seeds 1-11:
-    no contact in any."""
+    no contact in any; again after the free-space rule (``free_memory_s``): no contact, 169.4-175.3 m."""
     cell_m: float = 0.5
     """Side of a grid cell (m): the resolution of the persistent obstacles."""
     miss_score: float = 0.5
