@@ -4,9 +4,11 @@ Scenarios: ``rover_ctl.tuning.scenarios`` (open, scattered, walls, cul_de_sac, m
 head_on, overtaking, narrow_gap, dense_clutter; all at ArduPilot's CMAC field, shared with ``rover-ctl tune``; the daemon is
 never told where the obstacles are, it sees them only with its rangefinders).
 
-Variants: the rule bases ``paper`` and ``default`` (the daemon as shipped: yielding to crossing
-traffic on), ``default-yield``: the default rule base with yielding off (``YLD_ENABLE`` 0,
-the navigator of the previous rows), and ``default-side``: with the side guard off (``SIDE_ENABLE`` 0).
+Variants: the rule bases ``paper`` and ``default`` (the daemon as shipped), and the default rule
+base with one part of the daemon off: ``default-yield`` yielding (``YLD_ENABLE`` 0),
+``default-side`` the side guard (``SIDE_ENABLE`` 0), ``default-gap`` narrow passages
+(``GAP_ENABLE`` 0), ``default-map-gap`` narrow passages and the persistent-obstacle map
+(``OMAP_ENABLE`` 0: the shipped default until 2026-11-28).
 A collision is "moving" when the rover's true speed at the contact was above
 ``STOPPED_SPEED_MPS``, else "stopped" (struck while yielding).
 
@@ -44,8 +46,8 @@ VARIANTS = {
     "default": ("default", []),
     "default-yield": ("default", ["yielding.enabled=0"]),
     "default-side": ("default", ["side_guard.enabled=0"]),
-    "default+map": ("default", ["obstacle_map.enabled=1"]),
-    "default+map+gap": ("default", ["obstacle_map.enabled=1", "passage.enabled=1"]),
+    "default-gap": ("default", ["passage.enabled=0"]),
+    "default-map-gap": ("default", ["obstacle_map.enabled=0", "passage.enabled=0"]),
 }
 """Variant name -> (rule base, daemon config overrides)."""
 STOPPED_SPEED_MPS = 0.05
@@ -292,9 +294,12 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
         "(`SIDE_ENABLE=0`, docs/perception.md \"Flank contacts\"); rows measured before 2026-11-26's side guard ran without it. "
         "Collisions (moving / stopped): "
         f"the rover's true speed at the contact above {STOPPED_SPEED_MPS} m/s or not (only rows measured since "
-        "the split was added have it). Measured: the date of the run that made the row. default+map: the planner's "
-        "persistent-obstacle map on (`OMAP_ENABLE=1`, docs/perception.md); default+map+gap: that and narrow passages "
-        "(`GAP_ENABLE=1`). Both are off in the shipped default."
+        "the split was added have it). Measured: the date of the run that made the row. default-gap: narrow passages "
+        "off (`GAP_ENABLE=0`, docs/perception.md \"Narrow passages\"); default-map-gap: they and the planner's "
+        "persistent-obstacle map off (`OMAP_ENABLE=0`). Both are on in the shipped default since 2026-11-28; until then "
+        "`default` meant both off, and the notes below written before that call today's `default-map-gap` `default`, "
+        "today's `default` `default+map+gap` and today's `default-gap` `default+map` (their `default-yield` "
+        "and `default-side` had both off)."
     )
     if rulebase:
         markdown += (f"\n\n_This run: `--rulebase {rulebase}` against default on {', '.join(f'{n} seeds 1-{c}' for n, c in counts.items())}._")

@@ -722,8 +722,11 @@ class PassageParams:
     """Narrow passages (``rover_ctl.navigation.gaps``): an opening barely wider than the rover,
     seen through by a side rangefinder as the rover follows a wall, lined up on and driven through."""
 
-    enabled: bool = False
-    """Look for narrow passages and drive through them (docs/perception.md, "Narrow passages")."""
+    enabled: bool = True
+    """Look for narrow passages and drive through them (docs/perception.md, "Narrow passages"). On by
+    default since 2026-11-28, with the persistent-obstacle map: together they drive the benchmark's
+    narrow_gap through its opening in 99 of 100 worlds (0 with both off, docs/BENCHMARKS.md). With
+    the map off, the search's return along a wall costs walls about 21 s (in-process runner)."""
     side_clearance_m: float = 0.02
     """An opening is passable when it was seen free over at least the footprint's width plus this
     much on each side (m). What a 15 degree cone sees free of a 0.6 m opening in a 0.3 m wall is
@@ -832,13 +835,14 @@ class ObstacleMapParams:
     """Persistent obstacles (``rover_ctl.navigation.obstacle_map``): places the rangefinders echo
     from repeatedly, folded into the planner's map so that it plans around them."""
 
-    enabled: bool = False
+    enabled: bool = True
     """Fold persistent obstacles into the planner's map (off: the planner knows only fences,
-    known obstacles and the circles of a stuck rover). Off by default: with it on, `make demo`'s
-    mission met its looping walker in a way that ended in a collision in 3 of 18 runs (1 of 15
-    off: yielding's failure against a pacing walker, which the map makes likelier or not;
-    docs/perception.md). Re-run 2026-11-28 with narrow passages on as well, lockstep, seeds 1-11:
-    no contact in any; again after the free-space rule (``free_memory_s``): no contact, 169.4-175.3 m."""
+    known obstacles and the circles of a stuck rover). On by default since 2026-11-28, with narrow
+    passages: against both off no benchmark world is lost, the cul-de-sac takes 14 s less and walls
+    5 s more (docs/BENCHMARKS.md). `make demo`'s mission, lockstep, seeds 1-11: no contact,
+    169.4-175.3 m. (Before the free-space rule, ``free_memory_s``, and the passages' hand-back, the
+    map alone met the demo's looping walker in a way that ended in a collision in 3 of 18 runs, 1 of
+    15 with it off; docs/perception.md.)"""
     cell_m: float = 0.5
     """Side of a grid cell (m): the resolution of the persistent obstacles."""
     miss_score: float = 0.5

@@ -1,7 +1,8 @@
 """Persistent obstacles end to end (issue 12): emulator and daemon as processes, lockstep. In the
 benchmark's cul-de-sac (a U of walls open towards the rover on its leg) the rover, once its
 rangefinders have seen the U, has the walls in its planner's map and is planned out of the U and
-around it, instead of feeling its way along the walls (the map switched on: it is off by default)."""
+around it, instead of feeling its way along the walls (the map is on by default; the test
+sets it all the same, so that it tests the map whatever the default)."""
 
 from __future__ import annotations
 

@@ -290,16 +290,17 @@ def test_pushing_against_the_edge_stops_at_once_and_backs_out(monkeypatch):
 
 
 def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
-    """An episode with narrow passages on, in the in-process runner (the emulator's physics and
-    sensors, the daemon's autopilot), ``constants`` of the passage module replaced; its outcome and
-    the passage's state at each contact."""
+    """An episode with narrow passages on and the persistent-obstacle map off (the cases below
+    were found so, and the map's re-plans take other ways past the same drums), in the in-process
+    runner (the emulator's physics and sensors, the daemon's autopilot), ``constants`` of the
+    passage module replaced; its outcome and the passage's state at each contact."""
     from rover_ctl.fuzzy import load_rulebase
     from rover_ctl.navigation import gaps
     from rover_ctl.tuning.episode import Episode, episode_config
 
     for name, value in constants.items():
         monkeypatch.setattr(gaps, name, value)
-    episode = Episode(load_rulebase("default"), scenario, seed, episode_config(["passage.enabled=1"]), start_s=30.0)
+    episode = Episode(load_rulebase("default"), scenario, seed, episode_config(["passage.enabled=1", "obstacle_map.enabled=0"]), start_s=30.0)
     states_at_contact: list[str] = []
     step = episode.rover.step
 
