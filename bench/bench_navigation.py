@@ -16,7 +16,8 @@ Figures per scenario and rule base: success rate (mission complete, no collision
 time budget), collisions, path length over the shortest collision-free path (the planner's
 visibility-graph path around the true obstacles, inflated by the robot's half-width only; the
 straight legs for moving obstacles), mission time, smoothness as total heading change per metre
-(deg/m, from truth), and the control-loop latency p99 (sensor message in to override out).
+(deg/m, from truth), and the control-loop latency p99 (sensor message in to override out); then
+issue 12's goals, each met or not by the ``default`` rows (``goal_lines``).
 """
 
 from __future__ import annotations
@@ -151,6 +152,42 @@ def through_gap(scenario, run: Path) -> bool:
     return False
 
 
+GOAL_SUCCESS = 0.98
+"""Issue 12: the default rule base completes at least this share of every scenario's worlds..."""
+GOAL_THROUGH = 0.95
+"""...drives through the narrow gap in at least this share..."""
+GOAL_PATH_RATIO = 1.3
+"""...with a path at most this many times the shortest, and never touches anything while moving."""
+
+
+def goal_lines(rows: list[dict[str, Any]], variant: str = "default") -> list[str]:
+    """Issue 12's goals against the ``variant`` rows, as a markdown table: each goal met, or the
+    scenarios that miss it and by how much."""
+    mine = [r for r in rows if r["rulebase"] == variant]
+    if not mine:
+        return []
+
+    def verdict(misses: list[str]) -> str:
+        return "yes" if not misses else "no: " + ", ".join(misses)
+
+    success = [f"{r['scenario']} {r['success_rate']:.0%}" for r in mine if r["success_rate"] < GOAL_SUCCESS]
+    moving = [f"{r['scenario']} {r['collisions_moving']}" for r in mine if r.get("collisions_moving", r["collisions"])]
+    gap_rows = [r for r in mine if "through_gap" in r]
+    through = [r for r in gap_rows if r["through_gap"] < GOAL_THROUGH * r["runs"]]
+    path = [f"{r['scenario']} {r['path_ratio']:.2f}" for r in mine if not r["path_ratio"] <= GOAL_PATH_RATIO]
+    lines = [
+        f"| issue 12 goal, `{variant}` rows | met |",
+        "|---|---|",
+        f"| success at least {GOAL_SUCCESS:.0%} in every scenario | {verdict(success)} |",
+        f"| no collision with the rover moving | {verdict(moving)} |",
+    ]
+    for r in gap_rows:
+        met = "yes" if not through else "no"
+        lines.append(f"| narrow_gap: through the opening in at least {GOAL_THROUGH:.0%} of the worlds | {met} ({r['through_gap']} of {r['runs']}) |")
+    lines.append(f"| path at most {GOAL_PATH_RATIO} x the shortest in every scenario | {verdict(path)} |")
+    return lines
+
+
 def _mean(values: list[float]) -> float:
     values = [v for v in values if v is not None and math.isfinite(v)]
     return statistics.fmean(values) if values else math.nan
@@ -276,6 +313,8 @@ def run(quick: bool, only: list[str] | None = None, worlds: int | None = None, r
             "",
             f"narrow_gap runs whose true path crossed the wall's line inside the opening (the rest went round): {', '.join(through)}.",
         ]
+    if not rulebase:
+        lines += ["", *goal_lines(rows)]
     markdown = "\n".join(lines)
     markdown += (
         "\n\nEach run: `rover-sitl --lockstep` and `rover-ctl run` as processes, the mission uploaded and "
