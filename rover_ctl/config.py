@@ -633,6 +633,12 @@ class EvadeParams:
     max_velocity_jump_mps: float = 0.4
     """During the manoeuvre a live estimate replaces the latched one only while its velocity is
     within this of it (m/s): the turning rover's beams slide over the walker."""
+    not_oncoming_s: float = 0.5
+    """A manoeuvre ends once the live track has not closed on the rover along its course
+    (``min_closing_mps``) for this long (s; 0: never), and none starts again for that track: the
+    latch had kept a wrong first estimate (a crosser taken for a walker coming at the rover, SITL
+    ``crossing`` world 80, stepped aside into for 1.8 s to a contact). Runner, seeds 1-300 of
+    head_on, crossing and moving: 10 failed episodes with 0, 9 with 0.5 (docs/perception.md)."""
     side_free_m: float = 1.0
     """A side whose 45-degree rangefinder reads nearer than this is not stepped to (m)."""
     front_free_m: float = 0.8

@@ -419,6 +419,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("evasion.min_start_speed_mps", "EVD_MIN_SPEED", 0.0, 10.0, RW, {}),
     ("evasion.min_start_range_m", "EVD_MIN_RANGE", 0.0, 10.0, RW, {}),
     ("evasion.max_velocity_jump_mps", "EVD_MAX_VEL_JMP", 0.0, 10.0, RW, {}),
+    ("evasion.not_oncoming_s", "EVD_NOT_ONCOMING", 0.0, 10.0, RW, {}),
     ("evasion.side_free_m", "EVD_SIDE_FREE", 0.0, 10.0, RW, {}),
     ("evasion.front_free_m", "EVD_FRONT_FREE", 0.0, 10.0, RW, {}),
     ("evasion.max_s", "EVD_MAX_TIME", 0.1, 120.0, RW, {}),

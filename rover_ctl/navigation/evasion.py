@@ -51,8 +51,10 @@ of the one latched at the start (a turning rover's beams slide over the walker a
 whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to while the other
 reads farther. The manoeuvre ends
 when the obstacle is behind the rover (``r . h < 0``, ``h`` its heading, and separating), when
-going straight along the course clears it by ``release_margin_m`` more than ``R``, or after
-``max_s``. It also ends, and none starts, while the front rangefinder reads nearer than
+going straight along the course clears it by ``release_margin_m`` more than ``R``, after
+``max_s``, or once the live track has not closed on the rover (``w . u > -min_closing_mps``) for
+``not_oncoming_s``: the latched estimate was wrong (a crosser first taken for a walker coming at
+the rover), and no manoeuvre starts again for that track. It also ends, and none starts, while the front rangefinder reads nearer than
 ``front_free_m``: the rollouts see only the walker, and the rover, stepping aside at full speed,
 drove into a second obstacle its front rangefinder had read closing from 0.66 m (the runner's
 ``head_on`` seed 5); at close quarters the rule base drives.
@@ -99,6 +101,10 @@ class Evader:
         self._started_s = 0.0
         self._v0 = (0.0, 0.0)
         """The latched track's velocity when the manoeuvre started."""
+        self._not_oncoming_s: float | None = None
+        """Since when the live track has not been coming at the rover (None: it has)."""
+        self._dropped: int | None = None
+        """The track whose manoeuvre ended because it stopped closing: none starts for it again."""
 
     @property
     def active(self) -> bool:
@@ -135,8 +141,18 @@ class Evader:
                 return None
             self._started_s = time_s
             self._v0 = (self._track.v_east_mps, self._track.v_north_mps)
+            self._not_oncoming_s = None
         else:
-            self._refresh(live.get(self._track.ident))
+            current = live.get(self._track.ident)
+            if p.not_oncoming_s > 0.0 and current is not None and current.v_east_mps * ue + current.v_north_mps * un > -p.min_closing_mps:
+                self._not_oncoming_s = time_s if self._not_oncoming_s is None else self._not_oncoming_s
+                if time_s - self._not_oncoming_s >= p.not_oncoming_s:
+                    self._dropped = self._track.ident
+                    self._track = None
+                    return None
+            else:
+                self._not_oncoming_s = None
+            self._refresh(current)
         track = self._track
         e, n = track.position_at(time_s)
         re, rn = e - east_m, n - north_m
@@ -168,20 +184,25 @@ class Evader:
         if abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(p.max_heading_off_deg) or speed_now_mps < p.min_start_speed_mps:
             return None
         ue, un = math.cos(course_rad), math.sin(course_rad)
-        max_share = math.sin(math.radians(p.max_cross_deg))
         best, best_m = None, radius_m
         for track in tracks:
             e, n = track.position_at(time_s)
             re, rn = e - east_m, n - north_m
-            along = track.v_east_mps * ue + track.v_north_mps * un
-            across = abs(track.v_north_mps * ue - track.v_east_mps * un)
-            if (track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m or re * ue + rn * un < p.min_start_range_m
-                    or along > -p.min_closing_mps or across >= max_share * track.speed_mps):  # fmt: skip
+            if (track.ident == self._dropped or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m or re * ue + rn * un < p.min_start_range_m
+                    or not self._oncoming(track, ue, un)):  # fmt: skip
                 continue
             miss_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)
             if miss_m < best_m:
                 best, best_m = track, miss_m
         return None if best is None else best.snapshot()
+
+    def _oncoming(self, track: Track, ue: float, un: float) -> bool:
+        """The track comes towards the rover along its course (unit vector ``(ue, un)``): closing
+        at ``min_closing_mps`` or more, within ``max_cross_deg`` of the line (a crosser is the yielder's)."""
+        p = self.params
+        along = track.v_east_mps * ue + track.v_north_mps * un
+        across = abs(track.v_north_mps * ue - track.v_east_mps * un)
+        return along <= -p.min_closing_mps and across < math.sin(math.radians(p.max_cross_deg)) * track.speed_mps
 
     def _refresh(self, live: Track | None) -> None:
         """A live estimate replaces the latched one while its velocity agrees with the one latched

@@ -158,6 +158,38 @@ def test_a_velocity_corrupted_by_the_turn_does_not_replace_the_latched_one():
         assert (closest >= HALF_WIDTH_M + 0.5) == expect_clear, (jump_mps, closest)
 
 
+def test_a_track_that_stops_closing_on_the_rover_ends_the_manoeuvre():
+    """SITL ``crossing`` world 80: a crosser's first estimate came at the rover; once the manoeuvre
+    had started, its live track walked across and away, and the latched estimate kept the rover
+    stepping aside into the crosser's way for 1.8 s, to a contact. With ``not_oncoming_s`` the
+    manoeuvre ends once the live track has not closed for that long (the yielder's turn), and none
+    starts again for that track, whatever its estimate then does (the runner's ``moving`` seed 236:
+    a pacing walker's track came and went, and the rover stepped aside and back in turn); a live
+    velocity only swung sideways, still closing, does not end it (the test above)."""
+    for wait_s, ends in ((0.5, True), (0.0, False)):
+        ev = evader(not_oncoming_s=wait_s)
+        at, true_track = walker(0.0, 6.0, 0.0, -0.9)
+        started_s, active_after = None, []
+        for k in range(50):
+            t = k * 0.04
+            live = true_track(t)
+            if started_s is not None:
+                live.v_east_mps, live.v_north_mps = 0.8, 0.3  # across and away
+            ev.step(t, 0.0, CRUISE_MPS * t, NORTH, CRUISE_MPS, NORTH, CRUISE_MPS, [live])
+            started_s = t if started_s is None and ev.active else started_s
+            if started_s is not None and t > started_s:
+                active_after.append((round(t - started_s, 2), ev.active))
+        assert started_s is not None
+        assert all(active for dt, active in active_after if dt < wait_s)
+        assert any(not active for dt, active in active_after) == ends, (wait_s, active_after)
+        if ends:  # coming at the rover again: the same track starts nothing, another one does
+            for ident, started in ((1, False), (2, True)):
+                again = true_track(2.0, ident)
+                again.north_m = CRUISE_MPS * 2.0 + 4.0
+                again.born_en = (0.0, again.north_m + 1.0)
+                assert (ev.step(2.0, 0.0, CRUISE_MPS * 2.0, NORTH, CRUISE_MPS, NORTH, CRUISE_MPS, [again]) is not None) == started
+
+
 def test_the_manoeuvre_ends_once_the_walker_is_behind():
     at, track = walker(0.0, 6.0, 0.0, -0.9)
     ev = evader()
