@@ -112,6 +112,7 @@ class Evader:
 
     def reset(self) -> None:
         self._track = None
+        self._dropped = None
 
     def step(self, time_s: float, east_m: float, north_m: float, heading_rad: float, speed_now_mps: float,
              course_rad: float, speed_mps: float, tracks: Iterable[Track],

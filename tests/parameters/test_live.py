@@ -249,22 +249,27 @@ def ex_yield_switch(d: Daemon) -> list:
 def ex_evasion(d: Daemon) -> list:
     """The rover drives north at 1.2 m/s (as the evader lets it) towards walkers coming head-on at
     several offsets and speeds: one whose velocity swings sideways mid-manoeuvre, one with the
-    right diagonal blocked, one met while slow, one at the edge of the track's maturity; in each,
-    something else read 0.5 m ahead for a moment."""
+    right diagonal blocked, one met while slow, one at the edge of the track's maturity, one that
+    turns to walk across and away once the rover steps aside; in each, something else read 0.5 m
+    ahead for a moment."""
     from rover_ctl.navigation.tracks import Track
 
     evader, trace = d.autopilot.evader, []
-    cases = ((0.0, -0.9, 0, 0.0, 1.2, 20, 0.0), (0.3, -0.5, 0, 0.0, 1.2, 7, 0.1), (-0.2, -0.7, 1, 0.0, 1.2, 20, 0.0),
-             (0.0, -0.8, 0, 0.6, 1.2, 20, 0.0), (0.1, -0.3, 0, 0.0, 0.7, 6, 0.1), (0.0, -1.0, 0, 0.0, 1.2, 20, 0.13),
-             (0.6, -0.6, 0, 0.0, 1.2, 20, 0.0), (0.0, -0.25, 0, 0.0, 1.2, 20, 0.0))  # fmt: skip
-    for offset, vn, swing, blocked_right, speed0, hits, vv in cases:
+    cases = ((0.0, -0.9, 0, 0.0, 1.2, 20, 0.0, 0), (0.3, -0.5, 0, 0.0, 1.2, 7, 0.1, 0), (-0.2, -0.7, 1, 0.0, 1.2, 20, 0.0, 0),
+             (0.0, -0.8, 0, 0.6, 1.2, 20, 0.0, 0), (0.1, -0.3, 0, 0.0, 0.7, 6, 0.1, 0), (0.0, -1.0, 0, 0.0, 1.2, 20, 0.13, 0),
+             (0.6, -0.6, 0, 0.0, 1.2, 20, 0.0, 0), (0.0, -0.25, 0, 0.0, 1.2, 20, 0.0, 0), (0.0, -0.9, 0, 0.0, 1.2, 20, 0.0, 1))  # fmt: skip
+    for offset, vn, swing, blocked_right, speed0, hits, vv, leaves in cases:
         evader.reset()
         x, y, psi, v = 0.0, 0.0, math.pi / 2 + 0.3 * offset, speed0
+        stepped_aside = False
         for k in range(120):
             t = k * 0.05
+            stepped_aside |= evader.active
             we, wn = offset + (0.3 * vn if offset > 0.5 else 0.0) * t, 4.5 + vn * t
             v_east = (0.3 * vn if offset > 0.5 else 0.0) + (-0.7 if swing and evader.active else 0.0)
-            tracks = [Track(1, t, we, wn, v_east, vn, vv=vv, hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
+            v_north = (0.3 if leaves and stepped_aside else vn)
+            v_east = 0.8 if leaves and stepped_aside else v_east
+            tracks = [Track(1, t, we, wn, v_east, v_north, vv=vv, hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
             course = math.atan2(30.0 - y, -x)
             out = evader.step(t, x, y, psi, v, course, 1.2, tracks, {0: 0.5 if k % 40 == 20 else 4.0, 1: 4.0 - blocked_right * 5, 7: 4.0}, may_start=k % 40 != 3)
             speed, omega = (1.2, 3.0 * math.remainder(course - psi, math.tau)) if out is None else (out.speed_mps, out.yaw_rate_radps)
