@@ -52,10 +52,10 @@ whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to 
 reads farther. The manoeuvre ends
 when the obstacle is behind the rover (``r . h < 0``, ``h`` its heading, and separating), when
 going straight along the course clears it by ``release_margin_m`` more than ``R``, after
-``max_s``, or once the live track has not closed on the rover (``w . u > -min_closing_mps``) for
+``max_s``, or once the live track has not closed on the rover (``-w . u < min_closing_mps``) for
 ``not_oncoming_s``: the latched estimate was wrong (a crosser first taken for a walker coming at
-the rover), and no manoeuvre starts again for that track. It also ends, and none starts, while the front rangefinder reads nearer than
-``front_free_m``: the rollouts see only the walker, and the rover, stepping aside at full speed,
+the rover), and no manoeuvre starts again for that track. It also ends, and none starts, while
+the front rangefinder reads nearer than ``front_free_m``: the rollouts see only the walker, and the rover, stepping aside at full speed,
 drove into a second obstacle its front rangefinder had read closing from 0.66 m (the runner's
 ``head_on`` seed 5); at close quarters the rule base drives.
 
@@ -78,6 +78,11 @@ from rover_ctl.config import EvadeParams
 from rover_ctl.navigation.tracks import Track
 from rover_ctl.navigation.sensors import FRONT, FRONT_LEFT, FRONT_RIGHT
 from rover_ctl.navigation.yielding import closest_approach_m
+
+
+def _closing_mps(track: Track, ue: float, un: float) -> float:
+    """How fast the track comes back along the course (unit vector ``(ue, un)``): ``-w . u``."""
+    return -(track.v_east_mps * ue + track.v_north_mps * un)
 
 
 @dataclass(frozen=True)
@@ -145,7 +150,7 @@ class Evader:
             self._not_oncoming_s = None
         else:
             current = live.get(self._track.ident)
-            if p.not_oncoming_s > 0.0 and current is not None and current.v_east_mps * ue + current.v_north_mps * un > -p.min_closing_mps:
+            if p.not_oncoming_s > 0.0 and current is not None and _closing_mps(current, ue, un) < p.min_closing_mps:
                 self._not_oncoming_s = time_s if self._not_oncoming_s is None else self._not_oncoming_s
                 if time_s - self._not_oncoming_s >= p.not_oncoming_s:
                     self._dropped = self._track.ident
@@ -201,9 +206,8 @@ class Evader:
         """The track comes towards the rover along its course (unit vector ``(ue, un)``): closing
         at ``min_closing_mps`` or more, within ``max_cross_deg`` of the line (a crosser is the yielder's)."""
         p = self.params
-        along = track.v_east_mps * ue + track.v_north_mps * un
         across = abs(track.v_north_mps * ue - track.v_east_mps * un)
-        return along <= -p.min_closing_mps and across < math.sin(math.radians(p.max_cross_deg)) * track.speed_mps
+        return _closing_mps(track, ue, un) >= p.min_closing_mps and across < math.sin(math.radians(p.max_cross_deg)) * track.speed_mps
 
     def _refresh(self, live: Track | None) -> None:
         """A live estimate replaces the latched one while its velocity agrees with the one latched

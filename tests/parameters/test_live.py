@@ -267,8 +267,7 @@ def ex_evasion(d: Daemon) -> list:
             stepped_aside |= evader.active
             we, wn = offset + (0.3 * vn if offset > 0.5 else 0.0) * t, 4.5 + vn * t
             v_east = (0.3 * vn if offset > 0.5 else 0.0) + (-0.7 if swing and evader.active else 0.0)
-            v_north = (0.3 if leaves and stepped_aside else vn)
-            v_east = 0.8 if leaves and stepped_aside else v_east
+            v_east, v_north = (0.8, 0.3) if leaves and stepped_aside else (v_east, vn)
             tracks = [Track(1, t, we, wn, v_east, v_north, vv=vv, hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
             course = math.atan2(30.0 - y, -x)
             out = evader.step(t, x, y, psi, v, course, 1.2, tracks, {0: 0.5 if k % 40 == 20 else 4.0, 1: 4.0 - blocked_right * 5, 7: 4.0}, may_start=k % 40 != 3)
