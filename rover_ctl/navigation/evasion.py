@@ -34,30 +34,30 @@ coming back to its line at an angle, with a walker on the line, is often already
 side: turning across the walker's way towards the "away" side would be the larger manoeuvre.
 
 **Which tracks.** Confirmed moving tracks with at least ``min_hits`` echoes, a velocity standard
-deviation of at most ``max_speed_sd_mps`` and ``min_travel_m`` travelled from the first echo (a
-drum crossing the narrow front beam at first looks exactly like a walker coming down it: its echo,
-placed on the beam's axis, comes at the rover as its face passes, by up to its radius), ahead of the rover (``r . u >= min_start_range_m``: nearer,
-there is no room left to step aside, and the rule base is better at close quarters), coming towards it
-along its line (``w . u <= -min_closing_mps``, and ``|w x u| < sin(max_cross_deg) |w|``: a crosser
-is the yielder's), which the rover going on along ``u`` at its speed would pass closer than ``R``
-within ``horizon_s``. None starts while the rover points more than ``max_heading_off_deg`` off its
-course (its beams then sweep over surfaces and give tracks velocities that are not there), goes
-slower than ``min_start_speed_mps`` or yields to crossing traffic (a crosser passing in front of a
-slowed rover gives echoes that seem to come at it).
+deviation of at most ``max_speed_sd_mps`` and ``min_travel_m`` travelled from the first echo (a drum
+crossing the narrow front beam at first looks exactly like a walker coming down it: its echo, placed
+on the beam's axis, comes at the rover as its face passes, by up to its radius), ahead of the rover
+(``r . u >= min_start_range_m``: nearer, there is no room left to step aside, and the rule base is
+better at close quarters), coming towards it along its line (``w . u <= -min_closing_mps``, and
+``|w x u| < sin(max_cross_deg) |w|``: a crosser is the yielder's), which the rover going on along
+``u`` at its speed would pass closer than ``R`` within ``horizon_s``. None starts while the rover points
+more than ``max_heading_off_deg`` off its course (its beams then sweep over surfaces and give tracks
+velocities that are not there), goes slower than ``min_start_speed_mps`` or yields to crossing
+traffic (a crosser passing in front of a slowed rover gives echoes that seem to come at it).
 
 **While evading** the track's estimate is latched when the manoeuvre starts and moved on at its
 velocity; a live estimate replaces it only while its velocity stays within ``max_velocity_jump_mps``
-of the one latched at the start (a turning rover's beams slide over the walker and corrupt its velocity). A side
-whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to while the other
-reads farther. The manoeuvre ends
-when the obstacle is behind the rover (``r . h < 0``, ``h`` its heading, and separating), when
-going straight along the course clears it by ``release_margin_m`` more than ``R``, after
-``max_s``, or once the live track has not closed on the rover (``-w . u < min_closing_mps``) for
-``not_oncoming_s``: the latched estimate was wrong (a crosser first taken for a walker coming at
-the rover), and no manoeuvre starts again for that track. It also ends, and none starts, while
-the front rangefinder reads nearer than ``front_free_m``: the rollouts see only the walker, and the rover, stepping aside at full speed,
-drove into a second obstacle its front rangefinder had read closing from 0.66 m (the runner's
-``head_on`` seed 5); at close quarters the rule base drives.
+of the one latched at the start (a turning rover's beams slide over the walker and corrupt its
+velocity). A side whose 45-degree rangefinder reads nearer than ``side_free_m`` is not stepped to
+while the other reads farther. The manoeuvre ends when the obstacle is behind the rover
+(``r . h < 0``, ``h`` its heading, and separating), when going straight along the course clears it by
+``release_margin_m`` more than ``R``, after ``max_s``, or once the live track has not closed on the
+rover (``-w . u < min_closing_mps``) for ``not_oncoming_s``: the latched estimate was wrong (a
+crosser first taken for a walker coming at the rover), and no manoeuvre starts again for that track.
+It also ends, and none starts, while the front rangefinder reads nearer than ``front_free_m``: the
+rollouts see only the walker, and the rover, stepping aside at full speed, drove into a second
+obstacle its front rangefinder had read closing from 0.66 m (the runner's ``head_on`` seed 5); at
+close quarters the rule base drives.
 
 **Back to the path.** For ``rejoin_s`` after the last step a manoeuvre drove, the autopilot gives
 the navigator a carrot ``rejoin_lookahead_m`` along the path instead of the planner's 3 m, so the
