@@ -530,7 +530,12 @@ class ProximityParams:
     track_coast_s: float = 0.8
     """A track without an echo for this long is dropped."""
     track_echo_sigma_m: float = 0.1
-    """1-sigma of an echo's position: rangefinder noise plus the pose estimate's step-to-step jitter."""
+    """1-sigma of an echo's position along its beam: rangefinder noise plus the pose estimate's
+    step-to-step jitter."""
+    track_beam_half_deg: float = 7.5
+    """Half-width of a rangefinder's cone (deg): an echo is placed on the beam's axis, but the
+    obstacle may be anywhere across the cone, so across the beam its position is that uncertain
+    too (``rover_ctl.navigation.tracks``). 0: an echo is as sure across the beam as along it."""
     track_accel_sigma_mps2: float = 1.0
     """White-noise acceleration of the constant-velocity model (m/s^2): a walking person changes
     speed and direction at about this rate."""
@@ -541,6 +546,11 @@ class ProximityParams:
     track_max_speed_mps: float = 2.0
     """A track faster than this is not an obstacle but a beam's echo sliding along a surface as the
     rover turns: treated as static."""
+    track_pace_sigma: float = 2.0
+    """A track whose velocity is within this many of its own standard deviations of the rover's
+    keeps pace with it and is not moving (``rover_ctl.navigation.tracks``): a wall's echo slides
+    across a side beam at the rover's speed, which the beam's cone leaves uncertain. 0: only
+    ``track_min_speed_mps`` tells them apart."""
     track_max_count: int = 32
     """Tracks kept at once (bounds the control step's cost); a new one replaces the oldest silent one."""
 
@@ -567,7 +577,8 @@ class YieldParams:
     min_hits: int = 8
     """A track is yielded to only after this many echoes (about half a second of one rangefinder)."""
     max_speed_sd_mps: float = 0.3
-    """...and only while its velocity's standard deviation is at most this (m/s, either axis)."""
+    """...and only while the standard deviation of its velocity across the rover's course, the
+    crossing it is yielded for, is at most this (m/s)."""
     min_travel_m: float = 0.6
     """...and only once it has gone this far from its first echo (m): an echo sliding over a static
     drum's face moves up to about its radius; 1.6 s of a pedestrian at 0.5 m/s."""
@@ -613,7 +624,8 @@ class EvadeParams:
     min_hits: int = 6
     """A track is stepped aside from only after this many echoes (0.3 s of one rangefinder at 20 Hz)."""
     max_speed_sd_mps: float = 0.35
-    """...and only while its velocity's standard deviation is at most this (m/s, either axis)."""
+    """...and only while the standard deviation of its velocity along the rover's course, the
+    closing it is stepped aside for, is at most this (m/s)."""
     min_travel_m: float = 0.45
     """...and only once it has gone this far from its first echo (m): a drum crossing the front
     beam gives echoes that come at the rover by up to its radius as its face passes (0.45: 0.5 s of a walker
@@ -881,6 +893,11 @@ class ObstacleMapParams:
     """...and at most once per this interval (s): each hand-over rebuilds the visibility graph."""
     max_obstacles: int = 16
     """Clusters handed to the planner at most, the nearest to the rover first."""
+    track_on_wall_m: float = 0.5
+    """A moving obstacle track within this of a persistent cell (m) is taken for that obstacle's
+    face swept by a beam, not for a mover: the yielder, the evader and the narrow passages'
+    hand-back leave it out (in SITL ``cul_de_sac`` a turning rover's beams on the U's walls made
+    tracks that started false manoeuvres and yields). 0: every moving track counts."""
     simplify_m: float = 0.25
     """Tolerance (m) of the simplification of a cluster's outline (a diagonal staircase of cells
     becomes a straight side)."""

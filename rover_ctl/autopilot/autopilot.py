@@ -533,6 +533,16 @@ class Autopilot:
             self._returning = True
         return self._station_en if self._returning else None
 
+    def _movers(self, t_s: float, pose) -> list:
+        """The moving obstacle tracks, less those within ``obstacle_map.track_on_wall_m`` of a
+        persistent obstacle (with the map on): a wall's face swept by a turning rover's beam."""
+        rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
+        tracks = self.proximity.tracker.moving(t_s, rover_velocity)
+        if self.config.obstacle_map.enabled:
+            on_wall_m = self.config.obstacle_map.track_on_wall_m
+            tracks = [t for t in tracks if not self.obstacle_map.near_persistent(t.east_m, t.north_m, on_wall_m)]
+        return tracks
+
     def _drive(self, t_s: float, dt_s: float, pose: Pose, goal: EN, speed_mps: float, goal_seq: int,
                decision: FailsafeDecision, row: dict[str, Any]) -> WheelCommand:  # fmt: skip
         """Planner -> carrot -> obstacle memory -> fuzzy navigator -> wheel PI, towards ``goal``."""
@@ -564,8 +574,7 @@ class Autopilot:
                     self.passage.on_range(reading.time_s, orientation, reading.range_m)
         tracking = self.config.yielding.enabled or self.config.evasion.enabled
         if tracking:
-            rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
-            tracks = self.proximity.tracker.moving(t_s, rover_velocity)
+            tracks = self._movers(t_s, pose)
         if self.config.passage.enabled:  # a narrow passage: the manoeuvre drives, the rule base waits
             # (it hands back when a mover comes near: the yielder and the evader need the tracks)
             drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal, tracks if tracking else ())

@@ -33,17 +33,19 @@ vector and ``r = q - p`` (right when the track is dead ahead, as road users keep
 coming back to its line at an angle, with a walker on the line, is often already clear on its own
 side: turning across the walker's way towards the "away" side would be the larger manoeuvre.
 
-**Which tracks.** Confirmed moving tracks with at least ``min_hits`` echoes, a velocity standard
-deviation of at most ``max_speed_sd_mps`` and ``min_travel_m`` travelled from the first echo (a drum
-crossing the narrow front beam at first looks exactly like a walker coming down it: its echo, placed
-on the beam's axis, comes at the rover as its face passes, by up to its radius), ahead of the rover
-(``r . u >= min_start_range_m``: nearer, there is no room left to step aside, and the rule base is
-better at close quarters), coming towards it along its line (``w . u <= -min_closing_mps``, and
-``|w x u| < sin(max_cross_deg) |w|``: a crosser is the yielder's), which the rover going on along
-``u`` at its speed would pass closer than ``R`` within ``horizon_s``. None starts while the rover points
-more than ``max_heading_off_deg`` off its course (its beams then sweep over surfaces and give tracks
-velocities that are not there), goes slower than ``min_start_speed_mps`` or yields to crossing
-traffic (a crosser passing in front of a slowed rover gives echoes that seem to come at it).
+**Which tracks.** Confirmed moving tracks (none on a persistent obstacle's face:
+``obstacle_map.track_on_wall_m``) with at least ``min_hits`` echoes, a standard deviation of the
+velocity along the course (the closing stepped aside for) of at most ``max_speed_sd_mps`` and
+``min_travel_m`` travelled from the first echo (a drum crossing the narrow front beam at first looks
+exactly like a walker coming down it: its echo, placed on the beam's axis, comes at the rover as its
+face passes, by up to its radius), ahead of the rover (``r . u >= min_start_range_m``: nearer, there
+is no room left to step aside, and the rule base is better at close quarters), coming towards it
+along its line (``w . u <= -min_closing_mps``, and ``|w x u| < sin(max_cross_deg) |w|``: a crosser
+is the yielder's), which the rover going on along ``u`` at its speed would pass closer than ``R``
+within ``horizon_s``. None starts while the rover points more than ``max_heading_off_deg`` off its
+course (its beams then sweep over surfaces and give tracks velocities that are not there), goes
+slower than ``min_start_speed_mps`` or yields to crossing traffic (a crosser passing in front of a
+slowed rover gives echoes that seem to come at it).
 
 **While evading** the track's estimate is latched when the manoeuvre starts and moved on at its
 velocity; a live estimate replaces it only while its velocity stays within ``max_velocity_jump_mps``
@@ -194,7 +196,7 @@ class Evader:
         for track in tracks:
             e, n = track.position_at(time_s)
             re, rn = e - east_m, n - north_m
-            if (track.ident == self._dropped or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m or re * ue + rn * un < p.min_start_range_m
+            if (track.ident == self._dropped or track.hits < p.min_hits or track.velocity_var(ue, un) > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m or re * ue + rn * un < p.min_start_range_m
                     or not self._oncoming(track, ue, un)):  # fmt: skip
                 continue
             miss_m = closest_approach_m(re, rn, track.v_east_mps - speed_mps * ue, track.v_north_mps - speed_mps * un, p.horizon_s)

@@ -51,6 +51,11 @@ becomes one polygon of a few vertices, not a cell per echo. At most ``max_obstac
 handed out, the nearest to the rover first. The planner inflates them by the robot's half-width
 plus ``margin_m`` (``rover_ctl.navigation.planner``).
 
+**Walls are not movers.** ``near_persistent`` says whether a point lies within a distance of a
+persistent cell: the autopilot leaves moving tracks within ``track_on_wall_m`` of one out of what
+the yielder, the evader and narrow passages see, since a turning rover's beam sweeping over a
+wall's face gives an echo that slides like a walker (``rover_ctl.navigation.tracks``, "Limits").
+
 **Rate.** ``update`` reports how many cells changed persistence since the last ``obstacles``;
 the autopilot rebuilds the planner's graph only when that is at least ``min_change_cells`` and
 ``rebuild_min_interval_s`` has passed since the last rebuild (the visibility graph's rebuild is
@@ -203,6 +208,24 @@ class ObstacleMap:
     def persistent(self) -> frozenset[Key]:
         """The persistent cells as of the last ``update``."""
         return frozenset(self._persistent)
+
+    def near_persistent(self, east_m: float, north_m: float, distance_m: float) -> bool:
+        """Some persistent cell lies within ``distance_m`` of the point (cell squares, as of the
+        last ``update``; 0: never)."""
+        if distance_m <= 0.0 or not self._persistent:
+            return False
+        cell = self._cell_m
+        reach = math.ceil(distance_m / cell)
+        ke, kn = math.floor(east_m / cell), math.floor(north_m / cell)
+        for de in range(-reach, reach + 1):
+            for dn in range(-reach, reach + 1):
+                key = (ke + de, kn + dn)
+                if key in self._persistent:  # the square's nearest point to the point
+                    dx = max(key[0] * cell - east_m, 0.0, east_m - (key[0] + 1) * cell)
+                    dy = max(key[1] * cell - north_m, 0.0, north_m - (key[1] + 1) * cell)
+                    if math.hypot(dx, dy) <= distance_m:
+                        return True
+        return False
 
     def obstacles(self, rover_en: EN) -> tuple[tuple[EN, ...], ...]:
         """The persistent cells as at most ``max_obstacles`` polygons (exterior rings in ENU

@@ -84,7 +84,7 @@ class ObstacleMemory:
         e, n, axis = self.sensor_pose(orientation, east_m, north_m, heading_rad)
         east, north = e + range_m * math.cos(axis), n + range_m * math.sin(axis)
         tracked = self.params.horizon_s > 0.0 or self._tracking()
-        ident = self.tracker.add(time_s, east, north) if tracked else 0  # no cost when off
+        ident = self.tracker.add(time_s, east, north, axis, range_m) if tracked else 0  # no cost when off
         self._added.append((time_s, east, north, ident))
         return ident
 

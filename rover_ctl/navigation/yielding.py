@@ -51,18 +51,20 @@ waiting behind it would never end, and one walking at a stopped rover walks into
 track crosses is judged against the course ``u``, the line the rover keeps to (judged against
 ``h`` too, the runner's ``moving`` lost 4 of seeds 1-100 against none).
 
-Only tracks the tracker is sure of start a yield: at least ``min_hits`` echoes, a velocity
-standard deviation of at most ``max_speed_sd_mps``, and ``min_travel_m`` travelled since the first
-echo (as the rover drives past or turns by a static obstacle its echo slides over the obstacle's
-face and makes tracks that seem to move, but never far from where they started). And none starts
-while the rover points more than ``max_heading_off_deg`` away from its course (mid-turn around
-something): the model has it going along the course, and a turning rover's beams sweep over
-surfaces and give its tracks velocities that are not there. The limit (45 degrees) is wider than
-the evader's (30): a crosser the rule base has turned the rover from, the way it walks, must
-still be yielded to, or it strikes the rover's flank. For ``after_evasion_s`` after the evader
-last drove, the limit is ``after_evasion_heading_off_deg`` (30): the rover is turning back to its
-line, and a second walker coming head-on, its velocity swept sideways, would read as crossing and
-stop the rover in its way instead of being stepped aside from.
+The autopilot hands over the moving tracks, less those on a persistent obstacle's face
+(``obstacle_map.track_on_wall_m``). Only tracks the tracker is sure of start a yield: at least
+``min_hits`` echoes, a standard deviation of the velocity across the course (the crossing yielded
+for) of at most ``max_speed_sd_mps``, and ``min_travel_m`` travelled since the first echo (as the
+rover drives past or turns by a static obstacle its echo slides over the obstacle's face and makes
+tracks that seem to move, but never far from where they started). And none starts while the rover
+points more than ``max_heading_off_deg`` away from its course (mid-turn around something): the model
+has it going along the course, and a turning rover's beams sweep over surfaces and give its tracks
+velocities that are not there. The limit (45 degrees) is wider than the evader's (30): a crosser the
+rule base has turned the rover from, the way it walks, must still be yielded to, or it strikes the
+rover's flank. For ``after_evasion_s`` after the evader last drove, the limit is
+``after_evasion_heading_off_deg`` (30): the rover is turning back to its line, and a second walker
+coming head-on, its velocity swept sideways, would read as crossing and stop the rover in its way
+instead of being stepped aside from.
 
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
 full speed clears it by ``release_margin_m`` more, or its course comes within half of
@@ -169,7 +171,7 @@ class Yielder:
                 if ident in live and across_mps < half_share * track.speed_mps:
                     continue
             elif (off_course or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
-                  or track.hits < p.min_hits or track.vv > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
+                  or track.hits < p.min_hits or track.velocity_var(-un, ue) > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
                 continue
             along_mps = track.v_east_mps * ue + track.v_north_mps * un  # either way: maybe the echo sliding
             crossing.append((ident, e - east_m, n - north_m, ((track.v_east_mps - along_mps * ue, track.v_north_mps - along_mps * un),

@@ -6,13 +6,15 @@ and pose filter; no sockets).
 the first from the front rangefinder. The rover steps aside for the first. Turning straight back
 to its path (the 3 m carrot, about 30 degrees off it) put the second walker in the blind wedge
 between the front beam and the front-left diagonal: it was first read at about 1.1 m, too late,
-and walked into the rover. Rejoining at a shallow angle keeps the front beam down the path."""
+and walked into the rover. Rejoining at a shallow angle keeps the front beam down the path. (The
+tracker of ``SURE_ECHOES``, the case's.)"""
 
 from __future__ import annotations
 
 import math
 
 from shapely.geometry import Point
+from support import SURE_ECHOES
 
 from rover_ctl.fuzzy import load_rulebase
 from rover_ctl.tuning.episode import Episode, episode_config
@@ -26,7 +28,7 @@ ECHO_TOLERANCE_M = 0.35
 def first_echoes(overrides: tuple[str, ...]) -> tuple[bool, dict[int, tuple[float, str]]]:
     """The episode's success, and for each walker the true distance and the rangefinder of the
     first reading that matches it."""
-    episode = Episode(load_rulebase("default"), "head_on", SEED, episode_config(overrides), stop_on_collision=True, start_s=30.0)
+    episode = Episode(load_rulebase("default"), "head_on", SEED, episode_config((*SURE_ECHOES, *overrides)), stop_on_collision=True, start_s=30.0)
     walkers = [o for o in episode.rover.world.obstacles if getattr(o, "moving", False)]
     seen: dict[int, tuple[float, str]] = {}
     step = episode.autopilot.step

@@ -210,6 +210,10 @@ def ex_tracks(d: Daemon) -> list:
         if k % 5 == 0:
             trace.append(sorted(memory.ranges(t, 0.0, 0.0, 0.0, {o: 4.0 for o in (0, 1, 2, 6, 7)}).items()))
             trace.append([(tr.ident, tr.hits, round(tr.v_east_mps, 9), round(tr.v_north_mps, 9)) for tr in memory.tracker.confirmed(t)])
+    for k in range(20):  # then driving east at 1 m/s beside a wall: the left beam's echo slides along it
+        t = 6.0 + k * 0.1
+        memory.add(t, 0.1 * k, 5.0, 0.0, 6, 1.5)
+        trace.append([tr.ident for tr in memory.tracker.moving(t, (1.0, 0.0))])
     return trace
 
 
@@ -224,7 +228,7 @@ def ex_yielding(d: Daemon) -> list:
         for k in range(150):
             t = k * 0.1
             hits, vv = (5 + k, 0.3 / (1 + k)) if k < 40 or ve < 0.5 else (0, 0.0)
-            tracks = [Track(1, t, -2.5 + ve * t, 3.5 + vn * t, ve, vn, vv=vv, hits=hits, born_en=(-2.5 - 4.0 * ve, 3.5))] if hits else []
+            tracks = [Track(1, t, -2.5 + ve * t, 3.5 + vn * t, ve, vn, b=(vv, 0.0, vv), hits=hits, born_en=(-2.5 - 4.0 * ve, 3.5))] if hits else []
             decision = yielder.limit(0.0, north, math.pi / 2, speed_limit, tracks, t, heading_rad=math.pi / 2 - 0.01 * k)
             speed = speed_limit if decision.speed_limit_mps is None else decision.speed_limit_mps
             north += speed * 0.1
@@ -268,7 +272,7 @@ def ex_evasion(d: Daemon) -> list:
             we, wn = offset + (0.3 * vn if offset > 0.5 else 0.0) * t, 4.5 + vn * t
             v_east = (0.3 * vn if offset > 0.5 else 0.0) + (-0.7 if swing and evader.active else 0.0)
             v_east, v_north = (0.8, 0.3) if leaves and stepped_aside else (v_east, vn)
-            tracks = [Track(1, t, we, wn, v_east, v_north, vv=vv, hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
+            tracks = [Track(1, t, we, wn, v_east, v_north, b=(vv, 0.0, vv), hits=hits, born_en=(offset, 4.5 - 0.1 * k * vn))]
             course = math.atan2(30.0 - y, -x)
             out = evader.step(t, x, y, psi, v, course, 1.2, tracks, {0: 0.5 if k % 40 == 20 else 4.0, 1: 4.0 - blocked_right * 5, 7: 4.0}, may_start=k % 40 != 3)
             speed, omega = (1.2, 3.0 * math.remainder(course - psi, math.tau)) if out is None else (out.speed_mps, out.yaw_rate_radps)
@@ -360,6 +364,9 @@ def ex_obstacle_map(d: Daemon) -> list:
         ap._update_obstacle_map(t, pose, row)
         g = ap.follower.update(t, (0.0, north), (0.0, 20.0))
         trace.append((row.get("map_obstacles"), ap._map_obstacles, g.path.points if g.path else None))
+    ap.proximity.tracker.tracks = [Track(k + 1, 20.0, east, north, 0.6, 0.0, hits=20, last_echo_s=20.0) for k, (east, north) in
+                                   enumerate(((0.3, 5.6), (0.3, 5.2), (1.0, 3.5)))]  # fmt: skip
+    trace.append([t.ident for t in ap._movers(20.0, pose)])  # tracks on the wall's face (0.1, 0.5 m from it) and clear of it
     pose = SimpleNamespace(east_m=0.0, north_m=-30.0, heading_rad=math.pi / 2, speed_mps=0.5)
     for t in (40.0, 55.0, 70.0):  # far away, no echoes: the cells age
         ap._map_handed_s = -math.inf

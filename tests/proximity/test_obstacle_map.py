@@ -9,6 +9,7 @@ from dataclasses import replace
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
+from support import SURE_ECHOES
 
 from rover_ctl.config import ObstacleMapParams
 from rover_ctl.navigation.obstacle_map import JOIN_FRACTION, ObstacleMap
@@ -48,6 +49,18 @@ def test_a_wall_seen_repeatedly_becomes_one_polygon_and_not_before_min_span():
     for x in (-1.0, 0.0, 1.0):
         assert covered(obstacles, (x, 3.0), PARAMS.simplify_m + 1e-6)
     assert not covered(obstacles, (0.0, 0.0), 0.0)
+
+
+def test_a_point_near_a_persistent_wall_is_on_its_face():
+    """The cells of a wall along y = 3 (0.5 m cells: rows 3.0-3.5), within a distance measured to
+    the cells' squares; no distance, or no persistent cell, is never on a wall."""
+    m = ObstacleMap(PARAMS)
+    assert not m.near_persistent(0.0, 3.0, 1.0)
+    look_at_wall(m, 0.0, 3.0)
+    assert m.near_persistent(0.2, 3.2, 0.5) and m.near_persistent(0.2, 2.6, 0.5)
+    assert not m.near_persistent(0.2, 2.4, 0.5) and m.near_persistent(0.2, 2.4, 0.7)
+    assert not m.near_persistent(0.2, 3.2, 0.0)
+    assert not m.near_persistent(8.0, 3.2, 0.5)  # past the wall's end
 
 
 def test_a_brief_echo_is_not_persistent():
@@ -170,12 +183,13 @@ def test_a_drum_crossing_a_stopped_rovers_beam_is_not_planned_around():
     """In-process runner, moving seed 93 with the map on: the rover stopped to let the crossing drum
     pass; the drum's echo stood still on the front beam's axis for 1.8 s (a track of its own, not
     the one yielded to), the cell became persistent and the re-plan around it led the rover into
-    the walker coming down the leg. With the free-space rule it is never persistent."""
+    the walker coming down the leg. With the free-space rule it is never persistent. (The tracker of
+``SURE_ECHOES``, the case's.)"""
     from rover_ctl.fuzzy import load_rulebase
     from rover_ctl.tuning.episode import Episode, episode_config
 
     def run(memory_s: float):
-        config = episode_config(["obstacle_map.enabled=1", f"obstacle_map.free_memory_s={memory_s}"])
+        config = episode_config(["obstacle_map.enabled=1", f"obstacle_map.free_memory_s={memory_s}", *SURE_ECHOES])
         return Episode(load_rulebase("default"), "moving", 93, config, start_s=30.0).run()
 
     assert run(PARAMS.free_memory_s).success

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -46,7 +47,9 @@ def test_no_echo_adds_nothing_and_missing_sensors_stay_missing(memory):
     assert set(memory.ranges(0.1, 0.0, 0.0, 0.0, {FRONT: math.inf})) == {FRONT}  # a silent sensor is not invented
 
 
-PREDICTING = ProximityParams(horizon_s=2.0)
+PREDICTING = ProximityParams(horizon_s=2.0, track_beam_half_deg=0.0)
+"""Prediction, with echoes as sure across their beam as along it: ``_watch`` keeps the beam on the
+obstacle, so its echoes are exact."""
 
 
 def _watch(memory: ObstacleMemory, start_en, velocity_en, seconds: float) -> float:
@@ -62,7 +65,7 @@ def _watch(memory: ObstacleMemory, start_en, velocity_en, seconds: float) -> flo
 
 @pytest.mark.parametrize("horizon_s", [0.0, 2.0])
 def test_a_pedestrian_about_to_cross_ahead_reads_ahead_only_with_prediction(horizon_s):
-    memory = ObstacleMemory(ProximityParams(horizon_s=horizon_s), 0.0, 0.0)
+    memory = ObstacleMemory(replace(PREDICTING, horizon_s=horizon_s), 0.0, 0.0)
     t = _watch(memory, (2.0, -2.5), (0.0, 1.0), 1.0)  # now at (2, -1.5), 37 deg right, walking north
     ranges = memory.ranges(t, 0.0, 0.0, 0.0, CLEAR)  # facing east
     if horizon_s:

@@ -138,7 +138,7 @@ def test_when_no_speed_is_free_the_release_margin_does_not_rank_them():
 def test_unsure_tracks_are_not_yielded_to():
     """Few echoes, or a velocity still uncertain: no yield (a sliding echo makes such tracks)."""
     young = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=3)
-    unsure = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0), vv=0.5**2)
+    unsure = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 0.0), b=(0.5**2, 0.0, 0.5**2))
     assert yielder().limit(0.0, 0.0, NORTH, 1.2, [young], 0.0).speed_limit_mps is None
     assert yielder().limit(0.0, 0.0, NORTH, 1.2, [unsure], 0.0).speed_limit_mps is None
     wandering = Track(1, 0.0, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-1.5, 1.4))  # 0.3 m from its first echo
