@@ -217,14 +217,16 @@ class ObstacleMap:
         cell = self._cell_m
         reach = math.ceil(distance_m / cell)
         ke, kn = math.floor(east_m / cell), math.floor(north_m / cell)
-        for de in range(-reach, reach + 1):
-            for dn in range(-reach, reach + 1):
-                key = (ke + de, kn + dn)
-                if key in self._persistent:  # the square's nearest point to the point
-                    dx = max(key[0] * cell - east_m, 0.0, east_m - (key[0] + 1) * cell)
-                    dy = max(key[1] * cell - north_m, 0.0, north_m - (key[1] + 1) * cell)
-                    if math.hypot(dx, dy) <= distance_m:
-                        return True
+        if (2 * reach + 1) ** 2 <= len(self._persistent):  # look up the window's cells
+            keys = ((ke + de, kn + dn) for de in range(-reach, reach + 1) for dn in range(-reach, reach + 1))
+            near = [k for k in keys if k in self._persistent]
+        else:  # fewer persistent cells than the window holds: test those (a bounded cost either way)
+            near = [k for k in self._persistent if abs(k[0] - ke) <= reach and abs(k[1] - kn) <= reach]
+        for i, j in near:  # the square's nearest point to the point
+            dx = max(i * cell - east_m, 0.0, east_m - (i + 1) * cell)
+            dy = max(j * cell - north_m, 0.0, north_m - (j + 1) * cell)
+            if math.hypot(dx, dy) <= distance_m:
+                return True
         return False
 
     def obstacles(self, rover_en: EN) -> tuple[tuple[EN, ...], ...]:

@@ -3,6 +3,7 @@ persistent places as a few polygons (rover_ctl.navigation.obstacle_map)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
@@ -62,6 +63,27 @@ def test_a_point_near_a_persistent_wall_is_on_its_face():
     assert not m.near_persistent(0.2, 3.2, 0.0)
     assert not m.near_persistent(8.0, 3.2, 0.5)  # past the wall's end
 
+
+
+
+@functools.cache
+def _small_cell_wall() -> ObstacleMap:
+    m = ObstacleMap(replace(PARAMS, cell_m=0.1))  # small cells: a wall of some 30 of them
+    look_at_wall(m, 0.0, 30.0)
+    return m
+
+@settings(max_examples=200, deadline=None)
+@given(east=st.floats(-6.0, 6.0), north=st.one_of(st.floats(2.7, 3.4), st.floats(-3.0, 9.0)),
+       distance=st.one_of(st.floats(0.01, 0.2), st.floats(0.01, 10.0)))
+def test_on_a_face_is_the_distance_to_the_nearest_persistent_square(east, north, distance):
+    """Whichever way it looks (the cells around the point, or every persistent cell when there are
+    fewer of them), the answer is the distance to the nearest persistent cell's square."""
+    m = _small_cell_wall()
+    cell = m.params.cell_m
+    def to_square(i, j):
+        return math.hypot(max(i * cell - east, 0.0, east - (i + 1) * cell), max(j * cell - north, 0.0, north - (j + 1) * cell))
+    assert len(m.persistent) > 25  # a 0.2 m look's window (5 x 5 cells) is the smaller set
+    assert m.near_persistent(east, north, distance) == any(to_square(i, j) <= distance for i, j in m.persistent)
 
 def test_a_brief_echo_is_not_persistent():
     m = ObstacleMap(PARAMS)
