@@ -62,6 +62,7 @@ from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.side_guard import AHEAD, against_guard_removed, pass_speed_mps, rear_mover_side, side_turn_radps, way_ahead_clear
 from rover_ctl.navigation.yielding import Yielder, keep_line
 from rover_ctl.navigation.sensors import BACK, RangefinderPlan, SensorSetupError, plan_rangefinders
+from rover_ctl.navigation.tracks import Track
 from rover_ctl.navigation.wheel_control import WheelCommand, WheelController
 from rover_ctl.vocabulary import MissionState, RoverMode, Severity, mav
 
@@ -533,7 +534,7 @@ class Autopilot:
             self._returning = True
         return self._station_en if self._returning else None
 
-    def _movers(self, t_s: float, pose) -> list:
+    def _movers(self, t_s: float, pose: Pose) -> list[Track]:
         """The moving obstacle tracks, less those within ``obstacle_map.track_on_wall_m`` of a
         persistent obstacle (with the map on): a wall's face swept by a turning rover's beam."""
         rover_velocity = (pose.speed_mps * math.cos(pose.heading_rad), pose.speed_mps * math.sin(pose.heading_rad))
