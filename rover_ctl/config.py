@@ -895,9 +895,10 @@ class ObstacleMapParams:
     """Clusters handed to the planner at most, the nearest to the rover first."""
     track_on_wall_m: float = 0.5
     """A moving obstacle track within this of a persistent cell (m) is taken for that obstacle's
-    face swept by a beam, not for a mover: the yielder, the evader and the narrow passages'
-    hand-back leave it out (in SITL ``cul_de_sac`` a turning rover's beams on the U's walls made
-    tracks that started false manoeuvres and yields). 0: every moving track counts."""
+    face swept by a beam, not for a mover: the yielder, the evader, the side guard's rear check and
+    the narrow passages' hand-back leave it out (in SITL ``cul_de_sac`` a turning rover's beams on
+    the U's walls made tracks that started false manoeuvres and yields). 0: every moving track
+    counts."""
     simplify_m: float = 0.25
     """Tolerance (m) of the simplification of a cluster's outline (a diagonal staircase of cells
     becomes a straight side)."""

@@ -53,8 +53,9 @@ plus ``margin_m`` (``rover_ctl.navigation.planner``).
 
 **Walls are not movers.** ``near_persistent`` says whether a point lies within a distance of a
 persistent cell: the autopilot leaves moving tracks within ``track_on_wall_m`` of one out of what
-the yielder, the evader and narrow passages see, since a turning rover's beam sweeping over a
-wall's face gives an echo that slides like a walker (``rover_ctl.navigation.tracks``, "Limits").
+the yielder, the evader, the side guard's rear check and narrow passages see, since a turning
+rover's beam sweeping over a wall's face gives an echo that slides like a walker
+(``rover_ctl.navigation.tracks``, "Limits").
 
 **Rate.** ``update`` reports how many cells changed persistence since the last ``obstacles``;
 the autopilot rebuilds the planner's graph only when that is at least ``min_change_cells`` and
