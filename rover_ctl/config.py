@@ -736,6 +736,41 @@ class SideGuardParams:
 
 
 @dataclass
+class PivotParams:
+    """Pivot turns (``rover_ctl.navigation.pivot``): a target far off the heading is first faced by
+    turning in place, as ArduPilot Rover's WP_PIVOT_ANGLE / WP_PIVOT_RATE do."""
+
+    angle_deg: float = 60.0
+    """Pivot when the target is more than this off the heading (deg; ArduPilot's default); at most
+    ``accuracy_deg``: off, the rule base turns as it will."""
+    rate_dps: float = 60.0
+    """Largest yaw rate of a pivot (deg/s; ArduPilot's default)."""
+    heading_gain: float = 2.0
+    """Yaw rate per radian of the target's direction (1/s), below ``rate_dps``: slows the turn's end."""
+    accuracy_deg: float = 5.0
+    """A pivot ends with the target this close to the heading (deg; ArduPilot's 5)."""
+    clear_m: float = 0.3
+    """No pivot while any range is at most this (m): a turn in place sweeps the footprint's corners."""
+    open_m: float = 1.5
+    """No pivot towards a target whose beams (within ``open_half_deg``) read at most this (m)."""
+    open_half_deg: float = 50.0
+    """Beams this close to the target's direction count for ``open_m`` (deg)."""
+    timeout_s: float = 6.0
+    """A pivot ends after this long whatever the heading (s)."""
+    rest_s: float = 2.0
+    """After a pivot ends, the next waits this long (s)."""
+    retry_after_m: float = 1.0
+    """After a pivot that timed out, the next waits until the rover has moved this far (m): one
+    that cannot turn is left to the rule base and the stuck failsafe."""
+    max_cross_track_m: float = 1.0
+    """No pivot farther than this from the planned path (m): off the path the rule base is going
+    round something, and what it is going round may be beside the rover where no beam looks."""
+    mover_m: float = 5.0
+    """No pivot while a moving obstacle track is within this (m): a rover turning in place is a
+    rover standing in a walker's way."""
+
+
+@dataclass
 class PassageParams:
     """Narrow passages (``rover_ctl.navigation.gaps``): an opening barely wider than the rover,
     seen through by a side rangefinder as the rover follows a wall, lined up on and driven through."""
@@ -927,6 +962,7 @@ class Config:
     evasion: EvadeParams = field(default_factory=EvadeParams)
     passage: PassageParams = field(default_factory=PassageParams)
     side_guard: SideGuardParams = field(default_factory=SideGuardParams)
+    pivot: PivotParams = field(default_factory=PivotParams)
     autopilot: AutopilotParams = field(default_factory=AutopilotParams)
     obstacle_map: ObstacleMapParams = field(default_factory=ObstacleMapParams)
     command_line: frozenset[str] = field(default=frozenset(), repr=False, compare=False)

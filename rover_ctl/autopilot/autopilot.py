@@ -57,6 +57,7 @@ from rover_ctl.navigation.gaps import Passage
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
+from rover_ctl.navigation.pivot import Pivot
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
 from rover_ctl.navigation.side_guard import AHEAD, against_guard_removed, pass_speed_mps, rear_mover_side, side_turn_radps, way_ahead_clear
@@ -74,7 +75,7 @@ LOG_COLUMNS = (
     "cross_track_m", "speed_limit_mps", "target_distance_m", "target_direction_rad",
     "range_front_m", "range_front_right_m", "range_right_m", "range_back_m", "range_left_m", "range_front_left_m",
     "left_set_rpm", "right_set_rpm", "left_meas_rpm", "right_meas_rpm", "steering_us", "throttle_us", "loop_rate_hz", "yield_track", "passage", "latency_ms",
-    "map_obstacles", "evade_track", "side_turn_radps", "side_pass_mps", "side_rear",
+    "map_obstacles", "evade_track", "side_turn_radps", "side_pass_mps", "side_rear", "pivot_radps",
 )  # fmt: skip
 """Columns of the control log, one row per step (``latency_ms`` is the shell's to fill)."""
 _EMPTY_ROW = dict.fromkeys(LOG_COLUMNS, "")
@@ -163,6 +164,7 @@ class Autopilot:
                                         tracking=lambda: config.yielding.enabled or config.evasion.enabled)  # fmt: skip
         self.yielder = Yielder(config.yielding, lambda: math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0)
         self.evader = Evader(config.evasion, lambda: robot.footprint_width_m / 2.0)
+        self.pivot = Pivot(config.pivot)
         self._evaded_s = -math.inf
         """The last step a manoeuvre of the evader drove (``evasion.rejoin_s`` after it, the rover rejoins its path)."""
         self.obstacle_map = ObstacleMap(config.obstacle_map)
@@ -617,6 +619,13 @@ class Autopilot:
             speed_mps = yielded.speed_limit_mps
             self._map_moving.add(yielded.track_ident)  # crossing traffic: never a persistent obstacle
             row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
+        piv = self.config.pivot
+        held = (yielding or rejoining or abs(guidance.cross_track_m) > piv.max_cross_track_m
+                or (tracking and any(math.hypot(t.east_m - pose.east_m, t.north_m - pose.north_m) <= piv.mover_m for t in tracks)))
+        turn = self.pivot.step(t_s, math.remainder(course - pose.heading_rad, math.tau), ranges, held, (pose.east_m, pose.north_m))
+        if turn is not None:
+            row.update(pivot_radps=turn)
+            return self._speed_and_turn(t_s, dt_s, 0.0, turn, row)
         nav = self.navigator.step(pose.east_m, pose.north_m, pose.heading_rad, guidance.target_en[0], guidance.target_en[1],
                                   ranges, speed_mps, guidance.remaining_m)  # fmt: skip
         left, right = nav.left_rpm, nav.right_rpm

@@ -549,6 +549,45 @@ def home_only(d: Daemon) -> None:
     d._set_home(HOME_FIX)
 
 
+def ex_pivot(d: Daemon) -> list:
+    """A sluggish rover (it turns at a tenth of the rate it is told) with its target north, 170
+    degrees to its left, for 12 s: the pivot's yaw rates (it pivots, times out, rests, is pushed
+    1.5 m along its leg and pivots again); then one as nimble as told, facing east (90 degrees), for 4 s (it ends near the target's
+    direction); then single steps facing east: something close to a flank, the front-left
+    diagonal reading 1.2 m, the rover 1.5 m off its path, a walker 4 m away (no pivot in each, by
+    default)."""
+    from rover_ctl.estimation.readings import RangeReading
+
+    ap, trace = d.autopilot, []
+    clear = FailsafeDecision(Action.NONE, (), (), frozenset(), False, False)
+
+    def step(t_s: float, east_m: float, heading_rad: float, ranges: dict[int, float], north_m: float = 0.0):
+        pose = SimpleNamespace(east_m=east_m, north_m=north_m, heading_rad=heading_rad, speed_mps=0.0)
+        ap._ranges = {o: RangeReading(t_s, o, o, r, 0.2, 4.0) for o, r in ranges.items()}
+        row = dict.fromkeys(LOG_COLUMNS, "")
+        ap._drive(t_s, 0.04, pose, (0.0, 20.0), 1.2, 1, clear, row)
+        return row["pivot_radps"]
+
+    free = dict.fromkeys((0, 1, 2, 4, 6, 7), math.inf)  # no echo (echoes swept by the turn would read as movers)
+    for t0_s, heading, steps, agility in ((10.0, math.radians(-80.0), 300, 0.1), (50.0, 0.0, 100, 1.0)):
+        ap.pivot.reset()
+        ap.follower.reset()
+        for k in range(steps):  # the rule base's turns left out; after 7 s the rover was pushed 1.5 m along its leg
+            rate = step(t0_s + k * 0.04, 0.0, heading, free, 1.5 if k >= 175 else 0.0)
+            heading += (rate or 0.0) * agility * 0.04
+            trace.append(None if rate == "" else round(rate, 9))
+    for k, (east_m, ranges, walker) in enumerate(((0.0, {**free, 2: 0.25}, False), (0.0, {**free, 7: 1.2}, False),
+                                                  (-1.5, free, False), (0.0, free, True))):  # fmt: skip
+        t_s = 100.0 * (k + 1)
+        ap.pivot.reset()
+        ap.follower.reset()
+        step(t_s - 50.0, 0.0, math.pi / 2, free)  # the path planned from the leg's start
+        ap.proximity.tracker.tracks = [Track(1, t_s, 4.0, 0.0, 0.0, 0.5, hits=20, last_echo_s=t_s, born_en=(4.0, -1.0))] if walker else []
+        rate = step(t_s, east_m, 0.0, ranges)
+        trace.append(None if rate == "" else round(rate, 9))
+    return trace
+
+
 def mission_ahead(d: Daemon) -> None:
     with_mission(d, [wp(0, 20)])
 
@@ -577,6 +616,7 @@ EXERCISES = {
     "obstacle_map": (mapping, ex_obstacle_map, tuple(f"obstacle_map.{f.name}" for f in dataclasses.fields(ObstacleMapParams) if f.name != "enabled")),
     "map_switch": (mission_ahead, ex_map_switch, ("obstacle_map.enabled",)),
     "side_guard": (mission_ahead, ex_side_guard, ("side_guard.", "robot.track_m", "robot.wheel_radius_m")),
+    "pivot": (mission_ahead, ex_pivot, ("pivot.",)),
 }
 SETTABLE = [p for p in TABLE if p.access is Access.RW]
 
