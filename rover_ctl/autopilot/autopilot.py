@@ -736,6 +736,7 @@ class Autopilot:
             self.follower.reset()
         self.passage.reset()
         self.evader.reset()
+        self.pivot.reset()
         self._evaded_s = -math.inf
         self.wheels.reset()
         if previous != mode:

@@ -127,3 +127,16 @@ def test_the_autopilot_turns_in_place_to_a_waypoint_behind_it_then_drives_there(
     swinging, swung_within_m = drive(0.0)
     assert all(o.log_row["pivot_radps"] == "" for o in swinging.outputs)
     assert swung_within_m > 0.3
+
+
+def test_a_mode_change_ends_a_pivot():
+    from rover_ctl.vocabulary import RoverMode
+    from tests.autopilot.harness import Bench, mission
+
+    bench = Bench()
+    bench.ready(mission((0.0, -8.0)))
+    assert bench.request(bench.autopilot.set_mode(RoverMode.AUTO)).accepted
+    bench.run(0.5)
+    assert bench.autopilot.pivot.active
+    assert bench.request(bench.autopilot.set_mode(RoverMode.HOLD)).accepted
+    assert not bench.autopilot.pivot.active
