@@ -3,8 +3,8 @@
 Each numeric field of the config sections (``rover_ctl.config``) is declared here once, keyed by
 ``section.field``, with its MAVLink name (at most 16 characters; ArduPilot's name where ArduPilot
 has one: WP_RADIUS, WP_SPEED, RTL_SPEED, FS_GCS_TIMEOUT, FS_ACTION, FENCE_ACTION, SYSID_THISMAV,
-WENC_RADIUS, SCHED_LOOP_RATE, WP_PIVOT_ANGLE, WP_PIVOT_RATE; otherwise one prefix per section: ``RBT_`` robot, ``LINK_`` vehicle
-link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
+WENC_RADIUS, SCHED_LOOP_RATE, WP_PIVOT_ANGLE, WP_PIVOT_RATE; otherwise one prefix per section:
+``RBT_`` robot, ``LINK_`` vehicle link, ``PLN_`` planner, ``WP_``/``RTL_``/``MIS_`` executor, ``FS_`` failsafes, ``EKF_`` estimator,
 ``WHL_`` wheel control, ``DMN_`` control loop, ``GCS_`` ground-station link, ``NAV_`` navigator,
 ``PRX_`` obstacle memory, ``YLD_`` yielding, ``EVD_`` evasion, ``OMAP_`` persistent obstacles, ``GAP_`` narrow
 passages, ``PIV_`` pivot turns, ``CLI_`` the ``rover-ctl mission`` client), its range and units. The default is the
@@ -387,18 +387,6 @@ _DECLARED: tuple[tuple, ...] = (
     ("proximity.track_confirm_hits", "PRX_TRK_CONFIRM", 1, 100, RW, {}),
     ("proximity.track_coast_s", "PRX_TRK_COAST", 0.05, 60.0, RW, {}),
     ("proximity.track_echo_sigma_m", "PRX_TRK_ECHO_SD", 0.001, 10.0, RW, {}),
-    ("pivot.angle_deg", "WP_PIVOT_ANGLE", 0.0, 360.0, RW, {"units": "deg"}),
-    ("pivot.rate_dps", "WP_PIVOT_RATE", 1.0, 720.0, RW, {"units": "deg/s"}),
-    ("pivot.heading_gain", "PIV_GAIN", 0.1, 20.0, RW, {"units": "1/s"}),
-    ("pivot.accuracy_deg", "PIV_ACCURACY", 0.5, 90.0, RW, {"units": "deg"}),
-    ("pivot.clear_m", "PIV_CLEAR", 0.0, 10.0, RW, {"units": "m"}),
-    ("pivot.open_m", "PIV_OPEN", 0.0, 10.0, RW, {"units": "m"}),
-    ("pivot.open_half_deg", "PIV_OPEN_HALF", 0.0, 180.0, RW, {"units": "deg"}),
-    ("pivot.timeout_s", "PIV_TIMEOUT", 0.1, 60.0, RW, {"units": "s"}),
-    ("pivot.mover_m", "PIV_MOVER", 0.0, 100.0, RW, {"units": "m"}),
-    ("pivot.rest_s", "PIV_REST", 0.0, 60.0, RW, {"units": "s"}),
-    ("pivot.retry_after_m", "PIV_RETRY_DIST", 0.0, 100.0, RW, {"units": "m"}),
-    ("pivot.max_cross_track_m", "PIV_XTRACK", 0.0, 100.0, RW, {"units": "m"}),
     ("proximity.track_beam_half_deg", "PRX_TRK_BEAM", 0.0, 89.0, RW, {"units": "deg"}),
     ("proximity.track_accel_sigma_mps2", "PRX_TRK_ACCEL", 0.01, 100.0, RW, {"units": "m/s/s"}),
     ("proximity.track_init_speed_sigma_mps", "PRX_TRK_VEL_SD", 0.01, 100.0, RW, {}),
@@ -500,6 +488,18 @@ _DECLARED: tuple[tuple, ...] = (
     ("passage.search_speed_mps", "GAP_SEARCH_SPD", 0.05, 2.0, RW, {}),
     ("passage.timeout_s", "GAP_TIMEOUT", 1.0, 600.0, RW, {}),
     ("passage.reject_s", "GAP_REJECT", 0.0, 3600.0, RW, {}),
+    ("pivot.angle_deg", "WP_PIVOT_ANGLE", 0.0, 360.0, RW, {"units": "deg"}),
+    ("pivot.rate_dps", "WP_PIVOT_RATE", 1.0, 720.0, RW, {"units": "deg/s"}),
+    ("pivot.heading_gain", "PIV_GAIN", 0.1, 20.0, RW, {"units": "1/s"}),
+    ("pivot.accuracy_deg", "PIV_ACCURACY", 0.5, 90.0, RW, {"units": "deg"}),
+    ("pivot.clear_m", "PIV_CLEAR", 0.0, 10.0, RW, {"units": "m"}),
+    ("pivot.open_m", "PIV_OPEN", 0.0, 10.0, RW, {"units": "m"}),
+    ("pivot.open_half_deg", "PIV_OPEN_HALF", 0.0, 180.0, RW, {"units": "deg"}),
+    ("pivot.timeout_s", "PIV_TIMEOUT", 0.1, 60.0, RW, {"units": "s"}),
+    ("pivot.mover_m", "PIV_MOVER", 0.0, 100.0, RW, {"units": "m"}),
+    ("pivot.rest_s", "PIV_REST", 0.0, 60.0, RW, {"units": "s"}),
+    ("pivot.retry_after_m", "PIV_RETRY_DIST", 0.0, 100.0, RW, {"units": "m"}),
+    ("pivot.max_cross_track_m", "PIV_XTRACK", 0.0, 100.0, RW, {"units": "m"}),
 )
 CONFIG_ONLY = frozenset({"link.vehicle_url", "link.gcs_url", "gcs.mission_store_path", "daemon.log_dir", "gcs.signing_key_path"})
 """Text fields: config file and command line only, never parameters."""

@@ -83,7 +83,7 @@ class Pivot:
         """Every beam within ``open_half_deg`` of the target's direction reads beyond ``open_m``."""
         p = self.params
         for orientation, range_m in ranges.items():
-            axis = ORIENTATION_RAD.get(orientation % 8) if orientation is not None else None
+            axis = ORIENTATION_RAD.get(orientation % 8)
             if axis is None or range_m is None or math.isnan(range_m) or range_m > p.open_m:
                 continue
             if abs(math.degrees(math.remainder(direction_rad - axis, math.tau))) <= p.open_half_deg:
