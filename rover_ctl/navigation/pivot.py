@@ -55,7 +55,7 @@ class Pivot:
         self._stuck_at = None
 
     def step(self, t_s: float, direction_rad: float, ranges: dict[int, float], held: bool,
-             position_en: tuple[float, float] = (0.0, 0.0)) -> float | None:  # fmt: skip
+             position_en: tuple[float, float]) -> float | None:  # fmt: skip
         """Yaw rate (rad/s, CCW) while pivoting towards ``direction_rad``; None: the rule base
         drives. ``position_en`` (m): where the rover is, for ``retry_after_m``."""
         p = self.params
