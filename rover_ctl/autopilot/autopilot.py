@@ -620,9 +620,13 @@ class Autopilot:
             self._map_moving.add(yielded.track_ident)  # crossing traffic: never a persistent obstacle
             row.update(speed_limit_mps=speed_mps, yield_track=yielded.track_ident)
         piv = self.config.pivot
+        direction = math.remainder(course - pose.heading_rad, math.tau)
+        # (last: a wall the passages' search is measuring, on the side the pivot would turn to)
         held = (yielding or rejoining or abs(guidance.cross_track_m) > piv.max_cross_track_m
-                or (tracking and any(math.hypot(t.east_m - pose.east_m, t.north_m - pose.north_m) <= piv.mover_m for t in tracks)))
-        turn = self.pivot.step(t_s, math.remainder(course - pose.heading_rad, math.tau), ranges, held, (pose.east_m, pose.north_m))
+                or (tracking and any(math.hypot(t.east_m - pose.east_m, t.north_m - pose.north_m) <= piv.mover_m for t in tracks))
+                or (self.config.passage.enabled and not self.pivot.active and abs(direction) > math.radians(piv.angle_deg)
+                    and self.passage.wall_beside(direction, (pose.east_m, pose.north_m), pose.heading_rad, goal)))  # fmt: skip
+        turn = self.pivot.step(t_s, direction, ranges, held, (pose.east_m, pose.north_m))
         if turn is not None:
             row.update(pivot_radps=turn)
             return self._speed_and_turn(t_s, dt_s, 0.0, turn, row)

@@ -411,6 +411,7 @@ class Passage:
         self._searched: list[tuple[float, EN, EN]] = []  # walls searched: (until when, a point on it, its normal)
         self._follow: tuple[float, EN, EN, EN, float] | None = None  # (when, point, along, normal, where its echoes began along it)
         self._follow_checked_s = -math.inf
+        self._beside: dict[int, tuple[float, tuple[EN, EN, EN] | None]] = {o: (math.nan, None) for o in SIDE_BODY_RAD}  # wall_beside's cache
         self._search: tuple[EN, EN, float, float] | None = None  # searching: (point, normal, offset, end along the wall)
         self._search_free_from: EN | None = None  # searching: where the side beam last stopped echoing
         self._gap_proved = False  # self.gap was proved free (not a place the wall stopped echoing)
@@ -444,6 +445,7 @@ class Passage:
         self._follow, self._search = None, None
         for sweep in self._sweeps.values():
             sweep.clear()
+        self._beside = {o: (math.nan, None) for o in SIDE_BODY_RAD}
 
     # ---- inputs --------------------------------------------------------------------------------
 
@@ -733,6 +735,36 @@ class Passage:
             return -math.inf
         k = here_n / (here_n - goal_n)
         return k * ((goal[0] - odo.east_m) * along[0] + (goal[1] - odo.north_m) * along[1])
+
+    def wall_beside(self, direction_rad: float, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
+        """The side beam on the side of ``direction_rad`` (body, counter-clockwise) is following a flat wall (its
+        latest run of echoes: ``WALL_MIN_ECHOES`` over ``WALL_MIN_SPAN_M`` of travel, one line)
+        that the goal lies beyond. A turn in place towards that side swings the beam off the wall
+        and cuts short the run that a search of the wall is measured from: in narrow_gap world 33
+        the planner's path ran through the part of the wall not yet mapped, behind the rover; the
+        rover turned to it, the path flipped to the wall's other end, it turned back, and the
+        search it then made stopped short of the gap (lockstep SITL; the rule base alone had
+        followed the wall on and searched it back past the gap). Each side's line is fitted once
+        per new reading, and only when asked."""
+        if self.state:
+            return False
+        for orientation, sweep in self._sweeps.items():
+            if SIDE_BODY_RAD[orientation] * direction_rad <= 0.0 or not sweep:
+                continue
+            if self._beside[orientation][0] != sweep[-1].time_s:
+                self._beside[orientation] = (sweep[-1].time_s, self._wall_run_line(list(sweep)))
+            line = self._beside[orientation][1]
+            if line is not None and self._goal_line_ahead_m((0.0, *line, 0.0), pose_en, pose_heading_rad, goal_en) > -math.inf:
+                return True
+        return False
+
+    def _wall_run_line(self, beams: list[Beam]) -> tuple[EN, EN, EN] | None:
+        """(point, along, normal) of the flat wall whose echoes end ``beams``, or None."""
+        wall = self._wall_before(beams)
+        if len(wall) < WALL_MIN_ECHOES or math.dist(wall[0].origin_en, wall[-1].origin_en) < WALL_MIN_SPAN_M:
+            return None
+        base, along, normal, rms = wall_line(wall, self.params.beam_half_deg)
+        return (base, along, normal) if rms <= WALL_MAX_RMS_M else None
 
     def gap_leads_to(self, gap: Gap, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
         """The goal lies beyond the gap's line (the goal taken into the odometry frame)."""

@@ -201,6 +201,22 @@ def test_a_wall_along_the_way_to_the_goal_is_not_searched_back():
     assert run.path[-1][0] > 10.0
 
 
+def test_a_wall_followed_towards_the_goal_is_beside_the_rover_on_its_side_only():
+    """``wall_beside`` holds a pivot that would swing the following beam off the wall: on the
+    wall's side (left), with the goal beyond it, once the beam has followed it ``WALL_MIN_SPAN_M``;
+    not on the other side, not with the goal on the rover's side, not before the run is long enough."""
+    left, right = math.radians(150.0), math.radians(-150.0)
+    early, passage = drive_past_gap(PARAMS, gap_x=5.0, gap_m=0.0, start=(-5.0, 1.9, 0.0), duration_s=1.2)
+    x, y, h = early.path[-1]
+    assert not passage.wall_beside(left, (x, y), h, (0.0, 13.0))  # 0.6 m followed
+    run, passage = drive_past_gap(PARAMS, gap_x=5.0, gap_m=0.0, start=(-5.0, 1.9, 0.0), duration_s=3.0)
+    x, y, h = run.path[-1]
+    assert passage.state == ""
+    assert passage.wall_beside(left, (x, y), h, (0.0, 13.0))
+    assert not passage.wall_beside(right, (x, y), h, (0.0, 13.0))
+    assert not passage.wall_beside(left, (x, y), h, (0.0, -10.0))
+
+
 def test_a_rover_that_coasts_on_after_turning_in_place_looks_only_once_settled():
     """The emulator's rover turned on 5.5 degrees past the gap's axis after the turn was stopped,
     the diagonals then read unalike and the gap was given up (narrow_gap worlds 1, 11, 17). With a
