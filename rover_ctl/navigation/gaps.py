@@ -737,9 +737,9 @@ class Passage:
         return k * ((goal[0] - odo.east_m) * along[0] + (goal[1] - odo.north_m) * along[1])
 
     def wall_beside(self, direction_rad: float, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> bool:
-        """The side beam on the side of ``direction_rad`` (body, counter-clockwise) is following a flat wall (its
-        latest run of echoes: ``WALL_MIN_ECHOES`` over ``WALL_MIN_SPAN_M`` of travel, one line)
-        that the goal lies beyond. A turn in place towards that side swings the beam off the wall
+        """The side beam on the side of ``direction_rad`` (body, counter-clockwise) is following a
+        flat wall (its latest run of echoes: ``WALL_MIN_ECHOES`` over ``WALL_MIN_SPAN_M`` of
+        travel, one line) that the goal lies beyond. A turn in place towards that side swings the beam off the wall
         and cuts short the run that a search of the wall is measured from: in narrow_gap world 33
         the planner's path ran through the part of the wall not yet mapped, behind the rover; the
         rover turned to it, the path flipped to the wall's other end, it turned back, and the
