@@ -572,7 +572,7 @@ class Passage:
             follow, self._follow = self._follow, None
             if follow is not None and time_s - follow[0] <= FRESH_S and not self._was_searched(follow[1], follow[3]) \
                     and self.gap_leads_to(Gap(follow[1], follow[3], 0.0, 0.0), pose_en, pose_heading_rad, goal_en) \
-                    and self._goal_line_ahead_m(follow, pose_en, pose_heading_rad, goal_en) <= p.search_m:  # fmt: skip
+                    and self._goal_line_ahead_m(follow[1:4], pose_en, pose_heading_rad, goal_en) <= p.search_m:  # fmt: skip
                 self._start_search(time_s, follow)
                 return self._searching(time_s, front, pose_en, pose_heading_rad, goal_en)
             candidate, self._candidate = self._candidate, None
@@ -723,10 +723,11 @@ class Passage:
         c, s = math.cos(turn), math.sin(turn)
         return (odo.east_m + c * de - s * dn, odo.north_m + s * de + c * dn)
 
-    def _goal_line_ahead_m(self, follow: tuple[float, EN, EN, EN, float], pose_en: EN, pose_heading_rad: float, goal_en: EN) -> float:
+    def _goal_line_ahead_m(self, line: tuple[EN, EN, EN], pose_en: EN, pose_heading_rad: float, goal_en: EN) -> float:
         """How far ahead along a followed wall (m, the way the rover follows it) the straight line
-        from the rover to the goal meets the wall's line (-inf where it does not)."""
-        _, base, along, normal, _ = follow
+        from the rover to the goal meets the wall's line (-inf where it does not). ``line``: a point
+        on it, the unit vector along it (the way the rover follows it) and its unit normal."""
+        base, along, normal = line
         odo = self.odometry
         goal = self._goal_in_odometry(pose_en, pose_heading_rad, goal_en)
         here_n = (odo.east_m - base[0]) * normal[0] + (odo.north_m - base[1]) * normal[1]
@@ -744,17 +745,18 @@ class Passage:
         the planner's path ran through the part of the wall not yet mapped, behind the rover; the
         rover turned to it, the path flipped to the wall's other end, it turned back, and the
         search it then made stopped short of the gap (lockstep SITL; the rule base alone had
-        followed the wall on and searched it back past the gap). Each side's line is fitted once
-        per new reading, and only when asked."""
+        followed the wall on and searched it back past the gap). Each side's line is fitted only
+        when asked, at most every ``SEARCH_CHECK_S``."""
         if self.state:
             return False
         for orientation, sweep in self._sweeps.items():
             if SIDE_BODY_RAD[orientation] * direction_rad <= 0.0 or not sweep:
                 continue
-            if self._beside[orientation][0] != sweep[-1].time_s:
+            fitted_s = self._beside[orientation][0]
+            if not sweep[-1].time_s - SEARCH_CHECK_S < fitted_s <= sweep[-1].time_s:
                 self._beside[orientation] = (sweep[-1].time_s, self._wall_run_line(list(sweep)))
             line = self._beside[orientation][1]
-            if line is not None and self._goal_line_ahead_m((0.0, *line, 0.0), pose_en, pose_heading_rad, goal_en) > -math.inf:
+            if line is not None and self._goal_line_ahead_m(line, pose_en, pose_heading_rad, goal_en) > -math.inf:
                 return True
         return False
 
