@@ -940,6 +940,14 @@ class ObstacleMapParams:
     margin_m: float = 0.2
     """The planner keeps the robot's half-width plus this (m) from a persistent obstacle; less
     than ``planner.clearance_margin_m`` because a cell already reaches beyond its echoes."""
+    odometry_frame: bool = True
+    """Keep the map in the dead-reckoning frame of the wheels and the gyro
+    (``rover_ctl.navigation.odometry``), laid onto the fused pose afresh at each control step,
+    rather than in the fused pose's own frame, which moves against the ground as GPS fixes come
+    in (0.1-0.4 m over 5 s): a wall seen along its length then stays one line of cells. In-process
+    runner, seeds 1-100: cul_de_sac path / shortest 1.52 -> 1.44 and 56.4 -> 50.7 s, walls 1.33 ->
+    1.31, the other scenarios as many failed episodes (docs/perception.md). Off, or no odometry
+    heard: the fused pose's frame. A change clears the map."""
 
 
 @dataclass

@@ -57,6 +57,7 @@ from rover_ctl.navigation.gaps import Passage
 from rover_ctl.navigation.navigator import Navigator
 from rover_ctl.navigation.evasion import Evader
 from rover_ctl.navigation.obstacle_map import ObstacleMap
+from rover_ctl.navigation.odometry import FrameLink, Odometry
 from rover_ctl.navigation.pivot import Pivot
 from rover_ctl.navigation.planner import Fence, PathFollower, Planner
 from rover_ctl.navigation.proximity import ObstacleMemory
@@ -171,7 +172,10 @@ class Autopilot:
         self._map_updated_s = self._map_handed_s = -math.inf
         self._map_obstacles: tuple = ()  # the persistent obstacles handed to the planner
         self._map_moving: set[int] = set()  # tracks yielded to since the last map update
-        self.passage = Passage(config.passage, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m)
+        self.odometry = Odometry()  # the frame of the obstacle map and the narrow passages
+        self._map_link: FrameLink | None = None  # this step's odometry frame laid onto the pose (None: the map is in the pose's)
+        self._map_in_odometry = False  # the frame the map's contents were placed in
+        self.passage = Passage(config.passage, lambda: robot.footprint_length_m, lambda: robot.footprint_width_m, self.odometry)
         self.mode = RoverMode.HOLD
         self.armed = False
         self.home: Home | None = None
@@ -232,7 +236,7 @@ class Autopilot:
     def on_wheels(self, reading: WheelDistance) -> None:
         self._sensor_seen(reading.time_s)
         self.wheels.on_wheels(reading)
-        self.passage.odometry.on_wheels(reading.left_m, reading.right_m)
+        self.odometry.on_wheels(reading.left_m, reading.right_m)
         if self.wheel_map.verdict is None:
             self.wheel_map.on_wheels(reading)
             if self.wheel_map.verdict == "reversed":
@@ -244,7 +248,7 @@ class Autopilot:
     def on_attitude(self, reading: Attitude) -> None:
         self._sensor_seen(reading.time_s)
         self.wheel_map.on_attitude(reading)
-        self.passage.odometry.on_gyro(reading.time_s, reading.yaw_rate_radps)
+        self.odometry.on_gyro(reading.time_s, reading.yaw_rate_radps)
 
     def _sensor_seen(self, t_s: float) -> None:
         if self._sensors_since_s is None:
@@ -543,7 +547,7 @@ class Autopilot:
         tracks = self.proximity.tracker.moving(t_s, rover_velocity)
         if self.config.obstacle_map.enabled:
             on_wall_m = self.config.obstacle_map.track_on_wall_m
-            tracks = [t for t in tracks if not self.obstacle_map.near_persistent(t.east_m, t.north_m, on_wall_m)]
+            tracks = [t for t in tracks if not self.obstacle_map.near_persistent(*self._to_map((t.east_m, t.north_m)), on_wall_m)]
         return tracks
 
     def _drive(self, t_s: float, dt_s: float, pose: Pose, goal: EN, speed_mps: float, goal_seq: int,
@@ -571,8 +575,8 @@ class Autopilot:
                 self._remembered_s[orientation] = reading.time_s
                 ident = self.proximity.add(reading.time_s, pose.east_m, pose.north_m, pose.heading_rad, orientation, reading.range_m)
                 if self.config.obstacle_map.enabled:
-                    sensor = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
-                    self.obstacle_map.add(reading.time_s, *sensor, reading.range_m, reading.max_range_m, ident)
+                    east, north, axis = self.proximity.sensor_pose(orientation, pose.east_m, pose.north_m, pose.heading_rad)
+                    self._map_add(reading.time_s, (east, north), axis, reading.range_m, reading.max_range_m, ident)
                 if self.config.passage.enabled:
                     self.passage.on_range(reading.time_s, orientation, reading.range_m)
         tracking = self.config.yielding.enabled or self.config.evasion.enabled
@@ -671,19 +675,40 @@ class Autopilot:
                 self.follower.set_persistent(())
             return
         row.update(map_obstacles=len(self._map_obstacles))
+        odometry = p.odometry_frame and self.odometry.live
+        self._map_link = self.odometry.link((pose.east_m, pose.north_m), pose.heading_rad) if odometry else None
+        if odometry != self._map_in_odometry:  # what the map holds was placed in the other frame
+            self._map_in_odometry = odometry
+            self.obstacle_map.clear()
         if t_s - self._map_updated_s < p.update_period_s:
             return
         self._map_updated_s = t_s
         robot = self.config.robot
-        position = (pose.east_m, pose.north_m)
+        position = self._to_map((pose.east_m, pose.north_m))
         changed = self.obstacle_map.update(t_s, position, math.hypot(robot.footprint_length_m, robot.footprint_width_m) / 2.0,
                                            self._map_moving)  # fmt: skip
         self._map_moving = set()
         if changed >= p.min_change_cells and t_s - self._map_handed_s >= p.rebuild_min_interval_s:
             self._map_handed_s = t_s
-            self._map_obstacles = self.obstacle_map.obstacles(position)
+            link = self._map_link
+            shapes = self.obstacle_map.obstacles(position)
+            self._map_obstacles = shapes if link is None else tuple(tuple(map(link.to_pose, ring)) for ring in shapes)
             self.follower.set_persistent(self._map_obstacles)
             row.update(map_obstacles=len(self._map_obstacles))
+
+    def _map_add(self, time_s: float, sensor_en: EN, axis_rad: float, range_m: float, max_range_m: float, track_ident: int = 0) -> None:
+        """One rangefinder reading (sensor and axis in the fused pose's frame) into the obstacle map."""
+        link = self._map_link
+        if link is not None:
+            sensor_en, axis_rad = link.to_odometry(sensor_en), axis_rad + link.turn_rad
+        self.obstacle_map.add(time_s, sensor_en[0], sensor_en[1], axis_rad, range_m, max_range_m, track_ident)
+
+    def _to_map(self, point_en: EN) -> EN:
+        """A point of the fused pose's frame in the obstacle map's: the odometry frame, where what
+        the beams saw seconds apart stays where it was against the rover as GPS fixes move the
+        pose (``rover_ctl.navigation.odometry``); the pose's own with ``obstacle_map.odometry_frame``
+        off or no odometry heard."""
+        return point_en if self._map_link is None else self._map_link.to_odometry(point_en)
 
     def _speed_and_turn(self, t_s: float, dt_s: float, speed_mps: float, yaw_rate_radps: float, row: dict[str, Any]) -> WheelCommand:
         """A manoeuvre's forward speed (m/s, negative: reverse) and yaw rate (rad/s, CCW) as wheel

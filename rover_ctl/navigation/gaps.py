@@ -33,7 +33,7 @@ cone is free only while it is free through the wall's whole depth.
 The GPS-fused pose moves against the ground by 0.1-0.2 m (median, p95 0.4 m) over 5 s as fixes
 come in (measured in the emulator), so a gap placed in that frame would not be where the rover
 aims a few seconds later. Everything here lives in a frame of its own integrated from the wheel
-distances and the gyro (``Odometry``: 1 cm per metre of slip in the emulator), where the beams
+distances and the gyro (``rover_ctl.navigation.odometry``: 1 cm per metre of slip in the emulator), where the beams
 that found the gap and the rover that drives through it agree to a few centimetres over the few
 metres involved. The fused pose is used only to know where the mission's goal is.
 
@@ -129,6 +129,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rover_ctl.config import PassageParams
+from rover_ctl.navigation.odometry import Odometry
 from rover_ctl.navigation.sensors import BACK, FRONT, FRONT_LEFT, FRONT_RIGHT, LEFT, RIGHT
 from rover_ctl.navigation.tracks import Track
 
@@ -222,37 +223,6 @@ other's where it was seen: the same wall (searched once per ``reject_s``; two fi
 
 def _wrap(angle: float) -> float:
     return math.remainder(angle, math.tau)
-
-
-class Odometry:
-    """Dead reckoning in a frame of its own: distance from the mean of the two wheels, heading
-    from the gyro's yaw rate (ATTITUDE's yawspeed, NED clockwise)."""
-
-    def __init__(self) -> None:
-        self.east_m = self.north_m = self.heading_rad = 0.0
-        self.yaw_rate_radps = 0.0
-        """The latest gyro reading (counter-clockwise)."""
-        self._wheels: tuple[float, float] | None = None
-        self._gyro_s: float | None = None
-
-    def on_wheels(self, left_m: float, right_m: float) -> None:
-        if self._wheels is not None:
-            step = ((left_m - self._wheels[0]) + (right_m - self._wheels[1])) / 2.0
-            if math.isfinite(step):
-                self.east_m += step * math.cos(self.heading_rad)
-                self.north_m += step * math.sin(self.heading_rad)
-        self._wheels = (left_m, right_m)
-
-    def on_gyro(self, time_s: float, yaw_rate_ned_radps: float) -> None:
-        if self._gyro_s is not None and 0.0 < time_s - self._gyro_s <= 0.5 and math.isfinite(yaw_rate_ned_radps):
-            self.heading_rad = _wrap(self.heading_rad - yaw_rate_ned_radps * (time_s - self._gyro_s))
-        if math.isfinite(yaw_rate_ned_radps):
-            self.yaw_rate_radps = -yaw_rate_ned_radps
-        self._gyro_s = time_s
-
-    @property
-    def position_en(self) -> EN:
-        return (self.east_m, self.north_m)
 
 
 @dataclass(frozen=True)
@@ -395,11 +365,12 @@ class Drive:
 class Passage:
     """Finds a narrow gap with the side rangefinders and drives through it (module docstring)."""
 
-    def __init__(self, params: PassageParams, footprint_length_m, footprint_width_m) -> None:
-        """The footprint: functions giving the value in force."""
+    def __init__(self, params: PassageParams, footprint_length_m, footprint_width_m, odometry: Odometry | None = None) -> None:
+        """The footprint: functions giving the value in force; ``odometry``: the dead reckoning
+        the caller feeds (a new one when None)."""
         self.params = params
         self._length_m, self._width_m = footprint_length_m, footprint_width_m
-        self.odometry = Odometry()
+        self.odometry = odometry if odometry is not None else Odometry()
         self._sweeps: dict[int, deque[Beam]] = {o: deque() for o in SIDE_BODY_RAD}
         self._front: list[float] = []
         self._diagonal_m: dict[int, float] = {}
@@ -717,11 +688,7 @@ class Passage:
 
     def _goal_in_odometry(self, pose_en: EN, pose_heading_rad: float, goal_en: EN) -> EN:
         """The goal, given in the fused pose's frame, in the odometry's."""
-        odo = self.odometry
-        turn = odo.heading_rad - pose_heading_rad
-        de, dn = goal_en[0] - pose_en[0], goal_en[1] - pose_en[1]
-        c, s = math.cos(turn), math.sin(turn)
-        return (odo.east_m + c * de - s * dn, odo.north_m + s * de + c * dn)
+        return self.odometry.link(pose_en, pose_heading_rad).to_odometry(goal_en)
 
     def _goal_line_ahead_m(self, line: tuple[EN, EN, EN], pose_en: EN, pose_heading_rad: float, goal_en: EN) -> float:
         """How far ahead along a followed wall (m, the way the rover follows it) the straight line

@@ -121,6 +121,13 @@ class ObstacleMap:
             return
         self._beams.append((time_s, sensor_east_m, sensor_north_m, axis_rad, range_m, max_range_m, track_ident))
 
+    def clear(self) -> None:
+        """Forget every cell and queued reading (a new cell size, or a new frame)."""
+        self.cells.clear()
+        self._free_s.clear()
+        self._beams.clear()
+        self._cell_m = self.params.cell_m
+
     def update(self, time_s: float, rover_en: EN, body_radius_m: float, moving_idents: Collection[int] = ()) -> int:
         """Fold the queued readings into the grid at ``time_s`` (the echoes of the tracks
         ``moving_idents`` left out), forget the cells overlapping the rover's body (a disc of
@@ -128,9 +135,7 @@ class ObstacleMap:
         last ``obstacles`` call."""
         p = self.params
         if p.cell_m != self._cell_m:  # a new cell size: the old cells mean nothing
-            self.cells.clear()
-            self._free_s.clear()
-            self._cell_m = p.cell_m
+            self.clear()
         beams, self._beams = self._beams, []
         if beams:
             self._misses(beams)

@@ -344,9 +344,13 @@ def ex_obstacle_map(d: Daemon) -> list:
     what the map hands the planner, and the path, at each step."""
     ap, trace = d.autopilot, []
     walls = [((-2.0, 6.0), (2.0, 6.0)), ((0.8, 4.2), (1.6, 5.6)), ((-1.5, 4.5), (-0.8, 5.2))]
+    odo = ap.odometry  # the wheels' frame: turned and shifted against the pose's (its cells fall elsewhere)
+    odo.on_gyro(0.0, 0.0)
+    odo.east_m, odo.north_m, odo.heading_rad = 0.13, 0.21, 0.3
     for k in range(500):
         t = k * 0.04
         north = min(0.02 * k, 3.0)
+        odo.on_wheels(north, north)
         pose = SimpleNamespace(east_m=0.0, north_m=north, heading_rad=math.pi / 2, speed_mps=0.5)
         axis = math.pi / 2 + 0.7 * math.sin(k * 0.37)
         r = math.inf
@@ -359,7 +363,7 @@ def ex_obstacle_map(d: Daemon) -> list:
                 u = (dx * (ay - north) - dy * ax) / det
                 if 0.0 <= u <= 1.0 and 0.0 < s <= 4.0:
                     r = min(r, s)
-        ap.obstacle_map.add(t, 0.0, north, axis, r, 4.0)
+        ap._map_add(t, (0.0, north), axis, r, 4.0)
         row: dict = {}
         ap._update_obstacle_map(t, pose, row)
         g = ap.follower.update(t, (0.0, north), (0.0, 20.0))
@@ -393,7 +397,7 @@ def ex_passage(d: Daemon) -> list:
     the sweep placed 0.12 m off (the front beam's scan, the guard)."""
     from proximity.gap_world import drive_past_gap
 
-    from rover_ctl.navigation.gaps import Odometry
+    from rover_ctl.navigation.odometry import Odometry
 
     passage = d.autopilot.passage
 

@@ -13,7 +13,8 @@ from proximity.gap_world import WIDTH, drive_past_gap
 from support import SURE_ECHOES
 
 from rover_ctl.config import PassageParams
-from rover_ctl.navigation.gaps import Beam, Odometry, gap_from_sweep, wall_line
+from rover_ctl.navigation.gaps import Beam, gap_from_sweep, wall_line
+from rover_ctl.navigation.odometry import Odometry
 
 PARAMS = replace(PassageParams(), enabled=True)
 WALL_Y = 3.0
