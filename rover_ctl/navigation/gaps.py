@@ -33,9 +33,10 @@ cone is free only while it is free through the wall's whole depth.
 The GPS-fused pose moves against the ground by 0.1-0.2 m (median, p95 0.4 m) over 5 s as fixes
 come in (measured in the emulator), so a gap placed in that frame would not be where the rover
 aims a few seconds later. Everything here lives in a frame of its own integrated from the wheel
-distances and the gyro (``rover_ctl.navigation.odometry``: 1 cm per metre of slip in the emulator), where the beams
-that found the gap and the rover that drives through it agree to a few centimetres over the few
-metres involved. The fused pose is used only to know where the mission's goal is.
+distances and the gyro (``rover_ctl.navigation.odometry``: 1 cm per metre of slip in the
+emulator), where the beams that found the gap and the rover that drives through it agree to a
+few centimetres over the few metres involved. The fused pose is used only to know where the
+mission's goal is.
 
 **Going through** (``Passage``). ``P0`` is the point on the gap's centre line ``standoff_m``
 before it.

@@ -1,6 +1,12 @@
-"""Persistent obstacles: rangefinder evidence accumulated in an ENU grid, the places seen
-repeatedly handed to the planner as polygons, after ArduPilot's AP_OADatabase (echoes kept with a
-time to live) feeding a path planner.
+"""Persistent obstacles: rangefinder evidence accumulated in a grid, the places seen repeatedly
+handed to the planner as polygons, after ArduPilot's AP_OADatabase (echoes kept with a time to
+live) feeding a path planner.
+
+The map is frame-agnostic: it takes readings, the rover's position and points in whatever frame
+its caller keeps it in. The autopilot keeps it in the odometry frame (``obstacle_map.odometry_frame``,
+``rover_ctl.navigation.odometry``), where echoes of one wall seen seconds apart fall on one line
+while GPS fixes move the fused pose by tenths of a metre, and lays the polygons onto the pose's
+frame when it hands them to the planner.
 
 Pure: no clock, no I/O. The autopilot hands every rangefinder reading to ``ObstacleMap.add`` (a
 cheap append) and, every ``update_period_s``, calls ``update`` (the batch folded into the grid,
@@ -10,7 +16,7 @@ this map is what the planner remembers, so that a leg found blocked is planned a
 rediscovered by bumping along it.
 
 **Grid.** A sparse grid of square cells of ``cell_m``, keyed by integer indices
-``(floor(east / cell_m), floor(north / cell_m))``; only cells that have had an echo exist. Each
+``(floor(x / cell_m), floor(y / cell_m))``; only cells that have had an echo exist. Each
 holds an evidence score ``e``, the times of its first and last echo, and is
 
     hit:   e <- min(e + 1, max_score)            an echo of a reading falls in the cell
@@ -99,7 +105,7 @@ class Cell:
 
 
 class ObstacleMap:
-    """Echo evidence in a sparse ENU grid; the persistent places as polygons (module docstring)."""
+    """Echo evidence in a sparse grid (the caller's frame); the persistent places as polygons (module docstring)."""
 
     def __init__(self, params: ObstacleMapParams) -> None:
         """``params`` is read at every call (a parameter changed by a ground station applies at once)."""
@@ -236,8 +242,8 @@ class ObstacleMap:
         return False
 
     def obstacles(self, rover_en: EN) -> tuple[tuple[EN, ...], ...]:
-        """The persistent cells as at most ``max_obstacles`` polygons (exterior rings in ENU
-        metres, the nearest cluster to ``rover_en`` first); marks them handed to the planner."""
+        """The persistent cells as at most ``max_obstacles`` polygons (exterior rings in the map's
+        frame, metres, the nearest cluster to ``rover_en`` first); marks them handed to the planner."""
         p, cell = self.params, self._cell_m
         self._handed = set(self._persistent)
         clusters = _clusters(self._persistent)

@@ -601,7 +601,13 @@ class Planner:
             for name, end in (("start", start), ("goal", goal)):
                 here = np.repeat(np.array([end]), len(nodes), axis=0)
                 candidates = np.flatnonzero(_tangent(pts, self._prev, self._next, here))
-                for k in candidates[self._visible(here[candidates], pts[candidates])]:
+                seen = candidates[self._visible(here[candidates], pts[candidates])]
+                if not len(seen):
+                    # A point a hair outside an outline (the rover pushed against an obstacle's
+                    # clearance band): its tangent lines graze the outline and rounding hides them.
+                    # Any visible vertex will do; the filter only saves work.
+                    seen = np.flatnonzero(self._visible(here, pts))
+                for k in seen:
                     graph.add_edge(name, int(k), weight=math.dist(end, nodes[k]))
             try:
                 route = nx.astar_path(
@@ -695,7 +701,8 @@ class PathFollower:
     when a blocked area expires, when new persistent obstacles come within the robot's half-width
     of the path ahead, and -- at most once per ``replan_min_interval_s`` -- when the cross-track
     error exceeds ``replan_off_path_m`` or the last plan failed. When the persistent obstacles
-    leave no way to the goal (a gap that reads closed), it plans without them until the goal changes.
+    leave no way to the goal (a gap that reads closed), it plans without them until the goal
+    changes or other persistent obstacles are handed to it (the map changed: tried again).
     """
 
     def __init__(self, planner: Planner, params: PlannerParams) -> None:
@@ -708,6 +715,7 @@ class PathFollower:
         self._force = False
         self._persistent: tuple[tuple[EN, ...], ...] = ()
         self._without_persistent: EN | None = None  # the goal planned for without persistent obstacles
+        self._blocking: tuple[tuple[EN, ...], ...] = ()  # the persistent obstacles that left it no way
 
     def block(self, now_s: float, center_en: EN, radius_m: float | None = None) -> None:
         """A leg is blocked at ``center_en``: avoid it (temporarily) and re-plan on the next update."""
@@ -718,8 +726,11 @@ class PathFollower:
         """New persistent obstacles for the planner; the next update re-plans only if the path
         ahead would touch one. True when the planner's map changed."""
         self._persistent = tuple(tuple(p) for p in polygons)
-        if self._without_persistent is not None and self._without_persistent == self._goal:
-            return False
+        if self._without_persistent is not None:
+            if self._persistent == self._blocking:
+                return False  # the ones that left no way, handed again
+            self._without_persistent = None  # new ones may leave a way again (a gap seen open since)
+            self._force = True
         changed = self.planner.set_persistent(self._persistent)
         if changed and self.path is not None and self.planner.near_persistent(self.path, self._progress_s):
             self._force = True
@@ -747,7 +758,7 @@ class PathFollower:
                 self.planner.set_persistent(self._persistent)
             self.path = self.planner.plan_leg(position_en, goal)
             if not self.path.ok and self.planner.has_persistent:
-                self._without_persistent = goal
+                self._without_persistent, self._blocking = goal, self._persistent
                 self.planner.set_persistent(())
                 self.path = self.planner.plan_leg(position_en, goal)
             self._goal, self._progress_s, self._last_plan_s, self._force = goal, 0.0, now_s, False

@@ -77,8 +77,36 @@ def test_when_persistent_obstacles_close_every_way_the_follower_plans_without_th
     assert not f.planner.has_persistent
     f.set_persistent([across])  # handed again for the same goal: still left out
     assert not f.planner.has_persistent
+    assert not f.update(0.6, (0.0, 0.6), (0.0, 20.0)).replanned
     g = f.update(1.0, (0.0, 1.0), (0.0, 5.0))  # a new goal: the persistent obstacles count again
     assert g.replanned and g.path.ok and f.planner.has_persistent
+
+
+def test_planning_without_persistent_obstacles_lasts_until_the_map_changes():
+    """On a long leg the map goes on learning: other obstacles handed to the follower (the gap
+    that read closed seen open) are tried again, and the rover plans around them."""
+    corridor = Fence(inclusion_polygons=(((-3.0, -5.0), (3.0, -5.0), (3.0, 25.0), (-3.0, 25.0)),))
+    f = PathFollower(Planner(PARAMS, ROBOT, corridor, persistent_margin_m=lambda: MARGIN_M), PARAMS)
+    f.update(0.0, (0.0, 0.0), (0.0, 20.0))
+    f.set_persistent([((-3.5, 10.0), (3.5, 10.0), (3.5, 10.5), (-3.5, 10.5))])
+    assert f.update(0.5, (0.0, 0.5), (0.0, 20.0)).path.points == ((0.0, 0.5), (0.0, 20.0))
+    opened = [((-3.5, 10.0), (-0.5, 10.0), (-0.5, 10.5), (-3.5, 10.5)), ((1.5, 10.0), (3.5, 10.0), (3.5, 10.5), (1.5, 10.5))]
+    f.set_persistent(opened)
+    g = f.update(1.0, (0.0, 1.0), (0.0, 20.0))
+    assert g.replanned and g.path.ok and f.planner.has_persistent
+    assert all(LineString(g.path.points).distance(Polygon(p)) >= ROBOT.footprint_width_m / 2 + MARGIN_M - 1e-6 for p in opened)
+
+
+def test_a_start_a_hair_outside_an_obstacles_clearance_band_still_finds_its_way():
+    """The rover pushed against a wall's clearance band, 0.017 m outside it by a rounded corner
+    (walls seed 30 in the runner): every tangent line from there grazes the outline, and rounding
+    had hidden them all, so the plan failed and the follower dropped the map."""
+    planner = Planner(PARAMS, ROBOT, persistent_margin_m=lambda: MARGIN_M)
+    wall = ((0.2, 13.9), (-3.3, 14.0), (-3.3, 14.5), (0.2, 14.4))
+    planner.set_persistent([wall])
+    path = planner.plan_leg((0.5, 13.6), (-1.645, 39.675))
+    assert path.ok and path.points[0] == (0.5, 13.6) and path.points[-1] == (-1.645, 39.675)
+    assert LineString(path.points[1:]).distance(Polygon(wall)) >= ROBOT.footprint_width_m / 2 + MARGIN_M - 1e-3
 
 
 def test_a_changed_margin_applies_to_the_next_plan():
