@@ -778,7 +778,7 @@ class PassageParams:
     enabled: bool = True
     """Look for narrow passages and drive through them (docs/perception.md, "Narrow passages"). On by
     default since 2026-11-28, with the persistent-obstacle map: together they drive the benchmark's
-    narrow_gap through its opening in 99 of 100 worlds (0 with both off, docs/BENCHMARKS.md). With
+    narrow_gap through its opening in 98 of 100 worlds (0 with both off, docs/BENCHMARKS.md). With
     the map off, the search's return along a wall costs walls about 21 s (in-process runner)."""
     side_clearance_m: float = 0.02
     """An opening is passable when it was seen free over at least the footprint's width plus this
@@ -891,8 +891,9 @@ class ObstacleMapParams:
     enabled: bool = True
     """Fold persistent obstacles into the planner's map (off: the planner knows only fences,
     known obstacles and the circles of a stuck rover). On by default since 2026-11-28, with narrow
-    passages: against both off no benchmark world is lost, the cul-de-sac takes 14 s less and walls
-    5 s more (docs/BENCHMARKS.md). `make demo`'s mission, lockstep, seeds 1-11: no contact,
+    passages: against both off (2026-11-29's rows) the cul-de-sac takes 17 s less and walls 10 s
+    less, and one scattered world is lost (a sliver the beams barely see, struck once the path
+    moved; docs/BENCHMARKS.md). `make demo`'s mission, lockstep, seeds 1-11: no contact,
     169.4-175.3 m. (Before the free-space rule, ``free_memory_s``, and the passages' hand-back, the
     map alone met the demo's looping walker in a way that ended in a collision in 3 of 18 runs, 1 of
     15 with it off; docs/perception.md.)"""
