@@ -894,7 +894,7 @@ class ObstacleMapParams:
     passages: against both off (2026-11-29's rows) the cul-de-sac takes 17 s less and walls 10 s
     less, and one scattered world is lost (a sliver the beams barely see, struck once the path
     moved; docs/BENCHMARKS.md). `make demo`'s mission, lockstep, seeds 1-11: no contact,
-    169.4-175.3 m. (Before the free-space rule, ``free_memory_s``, and the passages' hand-back, the
+    169.4-175.3 m (169.0-174.4 m with the map in the odometry frame, 2026-11-29). (Before the free-space rule, ``free_memory_s``, and the passages' hand-back, the
     map alone met the demo's looping walker in a way that ended in a collision in 3 of 18 runs, 1 of
     15 with it off; docs/perception.md.)"""
     cell_m: float = 0.5
