@@ -3,10 +3,10 @@ handed to the planner as polygons, after ArduPilot's AP_OADatabase (echoes kept 
 live) feeding a path planner.
 
 The map is frame-agnostic: it takes readings, the rover's position and points in whatever frame
-its caller keeps it in. The autopilot keeps it in the odometry frame (``obstacle_map.odometry_frame``,
-``rover_ctl.navigation.odometry``), where echoes of one wall seen seconds apart fall on one line
-while GPS fixes move the fused pose by tenths of a metre, and lays the polygons onto the pose's
-frame when it hands them to the planner.
+its caller keeps it in. The autopilot keeps it in the odometry frame
+(``obstacle_map.odometry_frame``, ``rover_ctl.navigation.odometry``), where echoes of one wall seen
+seconds apart fall on one line while GPS fixes move the fused pose by tenths of a metre, and lays
+the polygons onto the pose's frame when it hands them to the planner.
 
 Pure: no clock, no I/O. The autopilot hands every rangefinder reading to ``ObstacleMap.add`` (a
 cheap append) and, every ``update_period_s``, calls ``update`` (the batch folded into the grid,
@@ -105,7 +105,8 @@ class Cell:
 
 
 class ObstacleMap:
-    """Echo evidence in a sparse grid (the caller's frame); the persistent places as polygons (module docstring)."""
+    """Echo evidence in a sparse grid, in the caller's frame; the persistent places as polygons
+    (module docstring)."""
 
     def __init__(self, params: ObstacleMapParams) -> None:
         """``params`` is read at every call (a parameter changed by a ground station applies at once)."""
