@@ -129,10 +129,13 @@ class ObstacleMap:
         self._beams.append((time_s, sensor_east_m, sensor_north_m, axis_rad, range_m, max_range_m, track_ident))
 
     def clear(self) -> None:
-        """Forget every cell and queued reading (a new cell size, or a new frame)."""
+        """Forget every cell and queued reading (a new cell size, or a new frame): nothing is
+        persistent until new echoes say so; the next ``update`` counts the cells the planner was
+        handed as changed, so that it gets the empty set."""
         self.cells.clear()
         self._free_s.clear()
         self._beams.clear()
+        self._persistent = set()
         self._cell_m = self.params.cell_m
 
     def update(self, time_s: float, rover_en: EN, body_radius_m: float, moving_idents: Collection[int] = ()) -> int:

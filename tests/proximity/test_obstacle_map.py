@@ -154,6 +154,20 @@ def test_a_new_cell_size_starts_a_new_grid():
     assert not m.cells
 
 
+def test_a_cleared_map_holds_nothing_persistent_and_hands_the_planner_the_empty_set():
+    """The autopilot clears the map when its frame changes: what it held was placed in the other
+    frame, so not even the on-wall test of tracks may read it before the next update."""
+    m = ObstacleMap(PARAMS)
+    t = look_at_wall(m, 0.0, 3.0)
+    assert m.near_persistent(0.0, 3.0, 0.3)
+    assert m.obstacles((0.0, 0.0))
+    handed_cells = len(m.persistent)
+    m.clear()
+    assert not m.persistent and not m.near_persistent(0.0, 3.0, 0.3)
+    assert m.update(t + 0.5, (0.0, 0.0), BODY_M) == handed_cells
+    assert not m.obstacles((0.0, 0.0))
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     st.floats(-20, 20),
