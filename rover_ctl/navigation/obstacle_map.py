@@ -187,17 +187,28 @@ class ObstacleMap:
         inside = along <= free_m[:, None]
         ix = np.floor((e[:, None] + along * np.cos(axis)[:, None]) / cell).astype(np.int64)
         iy = np.floor((n[:, None] + along * np.sin(axis)[:, None]) / cell).astype(np.int64)
-        beam = np.broadcast_to(np.arange(len(beams))[:, None], ix.shape)
-        rows = np.unique(np.stack([beam[inside], ix[inside], iy[inside]], axis=1), axis=0)  # one miss per beam and cell
-        miss = self.params.miss_score
-        times = [b[0] for b in beams]
-        free_s = self._free_s
-        for b, i, j in rows.tolist():
-            c = self.cells.get((i, j))
+        # One miss per beam and cell: (cell, beam) pairs packed into one integer each, so that
+        # numpy's one-dimensional unique sorts them by cell, then beam.
+        ix, iy = ix[inside], iy[inside]
+        if not len(ix):
+            return
+        i0, j0 = int(ix.min()), int(iy.min())
+        span_j, beams_n = int(iy.max()) - j0 + 1, len(beams)
+        beam = np.broadcast_to(np.arange(beams_n)[:, None], inside.shape)[inside]
+        packed = np.unique(((ix - i0) * span_j + (iy - j0)) * beams_n + beam)
+        cell_code, beam = np.divmod(packed, beams_n)
+        first = np.flatnonzero(np.r_[True, cell_code[1:] != cell_code[:-1]])
+        counts = np.diff(np.r_[first, len(cell_code)])
+        newest = np.maximum.reduceat(np.array([b[0] for b in beams])[beam], first)  # when each cell was last seen free
+        miss, free_s, cells = self.params.miss_score, self._free_s, self.cells
+        for code, count, time_s in zip(cell_code[first].tolist(), counts.tolist(), newest.tolist()):
+            key = (code // span_j + i0, code % span_j + j0)
+            c = cells.get(key)
             if c is not None:
-                c.score -= miss
-            if memory_s > 0.0 and free_s.get((i, j), -math.inf) < times[b]:
-                free_s[(i, j)] = times[b]
+                for _ in range(count):  # one at a time: the same rounding as one reading at a time
+                    c.score -= miss
+            if memory_s > 0.0 and free_s.get(key, -math.inf) < time_s:
+                free_s[key] = time_s
 
     def _forget(self, time_s: float, rover_en: EN, body_radius_m: float) -> None:
         p, cell = self.params, self._cell_m
