@@ -516,6 +516,13 @@ class ProximityParams:
     sector_half_deg: float = 22.5
     """Each sensor answers for this much either side of its axis: with eight 45 degree directions
     the sectors tile the circle, as AP_Proximity's do."""
+    edge_sectors: bool = True
+    """The front and back sensors answer for their whole edge: a remembered echo counts for them
+    anywhere ahead of (behind) the footprint's edge within ``sector_half_deg`` of its ends, at its
+    distance from that edge, not only inside the cone from the sensor at the edge's middle. Near
+    the bumper that cone is narrower than the rover (at 0.2 m, +-0.08 m of a 0.4 m wide one): an
+    echo remembered there left every sector as the rover turned a little, and it drove on into the
+    obstacle (``rover_ctl.navigation.proximity``). False: the cones alone."""
     horizon_s: float = 0.0
     """Prediction horizon: each sensor's range is also shortened to the closest approach of every
     moving obstacle track within this many seconds of its predicted path (its own motion only;

@@ -501,6 +501,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("pivot.retry_after_m", "PIV_RETRY_DIST", 0.0, 100.0, RW, {"units": "m"}),
     ("pivot.max_cross_track_m", "PIV_XTRACK", 0.0, 100.0, RW, {"units": "m"}),
     ("obstacle_map.odometry_frame", "OMAP_ODOM", 0, 1, RW, {}),
+    ("proximity.edge_sectors", "PRX_EDGE", 0, 1, RW, {}),
 )
 CONFIG_ONLY = frozenset({"link.vehicle_url", "link.gcs_url", "gcs.mission_store_path", "daemon.log_dir", "gcs.signing_key_path"})
 """Text fields: config file and command line only, never parameters."""

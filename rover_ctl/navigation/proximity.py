@@ -11,6 +11,19 @@ sector (``sector_half_deg`` either side of its axis), measured from the sensor.
 Sensor positions are taken on the footprint's edge (front/back at half the length, sides at half
 the width, diagonals at the corners), which is where small rovers mount them.
 
+**Edges** (``edge_sectors``). The front and back sensors answer for their whole edge, the way the
+rover meets an obstacle: a remembered point counts for the front when it lies ahead of the front
+edge and within ``sector_half_deg`` of the edge's nearer end, i.e. in the cone from the sensor
+widened by the footprint's width; a point inside the sensor's own cone keeps its distance from the
+sensor, one in the widened part gets its distance from the edge (``hypot(ahead, beyond the
+edge's end)``). The widened sector's sides run from the corners at ``sector_half_deg``, where the
+diagonal sensors' sectors begin, so with the default 22.5 degrees the front, the diagonals and the
+sides still tile the circle. Without it, an echo 0.15 m ahead of the bumper and 0.1 m to one side
+lies in no sector at all (the front cone is +-0.06 m wide there): SITL scattered world 17, where
+a rover that had stopped for such an echo turned 9 degrees, read every sector clear and drove into
+the obstacle. The sides keep their cones: what brushes a flank is the side guard's
+(``rover_ctl.navigation.side_guard``).
+
 **Prediction** (``horizon_s`` > 0). Every echo then also goes to the obstacle tracker
 (``rover_ctl.navigation.tracks``). For each confirmed *moving* track the remembered echoes of
 that track (its trail: where it was) are dropped and its predicted path ``p + v tau`` for
@@ -103,14 +116,22 @@ class ObstacleMemory:
         if not len(points) or not latest_m:
             return dict(latest_m)
         # Every sensor at once, a row each: numpy's cost is per call, and the points are few.
-        sensors = [(e, n, math.cos(axis), math.sin(axis))  # math's: numpy's vectorised ones may round differently
-                   for e, n, axis in self._sensor_poses(latest_m, east_m, north_m, heading_rad)]  # fmt: skip
-        e, n, cos_axis, sin_axis = np.array(sensors).T[:, :, None]
+        p = self.params
+        half_rad = math.radians(p.sector_half_deg)
+        edge_m = self._width_m() / 2.0 if p.edge_sectors and half_rad < math.pi / 2.0 else 0.0
+        sensors = [(e, n, math.cos(axis), math.sin(axis), edge_m if orientation % 4 == 0 else 0.0)  # math's: numpy's
+                   for orientation, (e, n, axis) in zip(latest_m, self._sensor_poses(latest_m, east_m, north_m, heading_rad))]  # fmt: skip
+        e, n, cos_axis, sin_axis, half_edge = np.array(sensors).T[:, :, None]  # (vectorised ones may round differently)
         d_east, d_north = points[:, 0] - e, points[:, 1] - n
         distance = np.hypot(d_east, d_north)
         along = d_east * cos_axis + d_north * sin_axis
-        inside = along >= math.cos(math.radians(self.params.sector_half_deg)) * distance  # within sector_half_deg of the axis
-        nearest = np.where(inside, distance, math.inf).min(axis=1).tolist()
+        inside = along >= math.cos(half_rad) * distance  # within sector_half_deg of the axis
+        nearest_m = np.where(inside, distance, math.inf)
+        if edge_m > 0.0:  # the front and back edges' whole width (module docstring)
+            beside = np.abs(d_north * cos_axis - d_east * sin_axis) - half_edge  # across the axis, beyond the edge's end
+            ahead = (along > 0.0) & (beside <= along * math.tan(half_rad))
+            nearest_m = np.where(inside, nearest_m, np.where(ahead, np.hypot(along, np.maximum(beside, 0.0)), math.inf))
+        nearest = nearest_m.min(axis=1).tolist()
         out = {}
         for (orientation, range_m), nearest_m in zip(latest_m.items(), nearest):
             out[orientation] = min(range_m, nearest_m) if range_m is not None and not math.isnan(range_m) else range_m

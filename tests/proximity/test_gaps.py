@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from proximity.gap_world import WIDTH, drive_past_gap
-from support import SURE_ECHOES
+from support import CONE_SECTORS, SURE_ECHOES
 
 from rover_ctl.config import PassageParams
 from rover_ctl.navigation.gaps import Beam, gap_from_sweep, wall_line
@@ -309,8 +309,8 @@ def test_pushing_against_the_edge_stops_at_once_and_backs_out(monkeypatch):
 
 def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
     """An episode with narrow passages on, the persistent-obstacle map off and the tracker of
-    ``SURE_ECHOES`` (the cases below were found so, and the map's re-plans and other tracks take
-    other ways past the same drums), in the in-process runner (the emulator's physics and sensors,
+    ``SURE_ECHOES`` and the memory's ``CONE_SECTORS`` (the cases below were found so, and the map's
+    re-plans, other tracks and sectors take other ways past the same drums), in the in-process runner (the emulator's physics and sensors,
     the daemon's autopilot), ``constants`` of the passage module replaced; its outcome and the
     passage's state at each contact."""
     from rover_ctl.fuzzy import load_rulebase
@@ -319,7 +319,7 @@ def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
 
     for name, value in constants.items():
         monkeypatch.setattr(gaps, name, value)
-    episode = Episode(load_rulebase("default"), scenario, seed, episode_config(["passage.enabled=1", "obstacle_map.enabled=0", *SURE_ECHOES]), start_s=30.0)
+    episode = Episode(load_rulebase("default"), scenario, seed, episode_config(["passage.enabled=1", "obstacle_map.enabled=0", *SURE_ECHOES, *CONE_SECTORS]), start_s=30.0)
     states_at_contact: list[str] = []
     step = episode.rover.step
 

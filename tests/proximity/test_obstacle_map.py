@@ -10,7 +10,7 @@ from dataclasses import replace
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
-from support import SURE_ECHOES
+from support import CONE_SECTORS, SURE_ECHOES
 
 from rover_ctl.config import ObstacleMapParams
 from rover_ctl.navigation.obstacle_map import JOIN_FRACTION, ObstacleMap
@@ -220,14 +220,14 @@ def test_a_drum_crossing_a_stopped_rovers_beam_is_not_planned_around():
     pass; the drum's echo stood still on the front beam's axis for 1.8 s (a track of its own, not
     the one yielded to), the cell became persistent and the re-plan around it led the rover into
     the walker coming down the leg. With the free-space rule it is never persistent. (The tracker of
-``SURE_ECHOES``, the case's; pivot turns off and the map in the fused pose's frame, as when it was
-    found: they move the encounter.)"""
+    ``SURE_ECHOES`` and the memory's ``CONE_SECTORS``, the case's; pivot turns off and the map in the
+    fused pose's frame, as when it was found: they move the encounter.)"""
     from rover_ctl.fuzzy import load_rulebase
     from rover_ctl.tuning.episode import Episode, episode_config
 
     def run(memory_s: float):
         config = episode_config(["obstacle_map.enabled=1", f"obstacle_map.free_memory_s={memory_s}", "pivot.angle_deg=0", "obstacle_map.odometry_frame=0",
-                                *SURE_ECHOES])  # fmt: skip
+                                *SURE_ECHOES, *CONE_SECTORS])  # fmt: skip
         return Episode(load_rulebase("default"), "moving", 93, config, start_s=30.0).run()
 
     assert run(PARAMS.free_memory_s).success

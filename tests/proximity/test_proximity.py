@@ -34,6 +34,44 @@ def test_an_obstacle_that_left_the_beam_stays_in_its_sector(memory):
     assert ranges[FRONT] == math.inf and ranges[FRONT_RIGHT] < 2.2
 
 
+def _remembered_ahead(memory: ObstacleMemory, ahead_m: float, left_m: float, heading_deg: float = 0.0) -> dict[int, float]:
+    """One point ``ahead_m`` beyond the front edge (x = 0.2) and ``left_m`` left of the axis of
+    a rover at the origin facing east, remembered, then read with the rover turned ``heading_deg``."""
+    memory.add(0.0, ahead_m - 1.0, left_m, 0.0, FRONT, 1.0)  # from 1 m behind, the beam straight at it
+    return memory.ranges(0.1, 0.0, 0.0, math.radians(heading_deg), CLEAR)
+
+
+@pytest.mark.parametrize("left_m", [-0.19, -0.1, 0.1, 0.19])
+def test_an_echo_ahead_of_the_bumper_reads_in_front_across_its_whole_width(memory, left_m):
+    # 0.15 m ahead of the edge and 0.1 m aside: outside the front cone (+-0.06 m there), and
+    # every diagonal sector starts at its corner 22.5 degrees out: it was in no sector at all.
+    ranges = _remembered_ahead(memory, 0.15, left_m)
+    assert ranges[FRONT] == pytest.approx(0.15)  # its distance from the edge: what the bumper meets
+    assert all(ranges[o] == math.inf for o in CLEAR if o != FRONT)
+    cones = ObstacleMemory(ProximityParams(edge_sectors=False), footprint_length_m=0.4, footprint_width_m=0.4)
+    assert _remembered_ahead(cones, 0.15, left_m) == CLEAR
+
+
+def test_beyond_the_edges_end_the_widened_sector_meets_the_diagonal(memory):
+    # Ahead of the left corner (0.2, 0.2), within 22.5 degrees of straight ahead: front, at its
+    # distance from the corner; past 22.5 degrees: the front-left diagonal's.
+    ranges = _remembered_ahead(memory, 0.3, 0.2 + 0.3 * math.tan(math.radians(20.0)))
+    assert ranges[FRONT] == pytest.approx(0.3 / math.cos(math.radians(20.0)))
+    assert ranges[FRONT_LEFT] == math.inf
+    memory = ObstacleMemory(ProximityParams(), footprint_length_m=0.4, footprint_width_m=0.4)
+    ranges = _remembered_ahead(memory, 0.3, 0.2 + 0.3 * math.tan(math.radians(25.0)))
+    assert ranges[FRONT] == math.inf
+    assert ranges[FRONT_LEFT] == pytest.approx(0.3 / math.cos(math.radians(25.0)))
+
+
+def test_inside_the_sensors_cone_the_distance_is_still_from_the_sensor(memory):
+    ranges = _remembered_ahead(memory, 1.0, 0.3)  # 16.7 degrees off the axis: the cone's
+    assert ranges[FRONT] == pytest.approx(math.hypot(1.0, 0.3))
+    memory = ObstacleMemory(ProximityParams(), footprint_length_m=0.4, footprint_width_m=0.4)
+    memory.add(0.0, 0.7, 0.15, math.pi, FRONT, 1.0)  # 0.3 m behind the back edge, 0.15 m aside
+    assert memory.ranges(0.1, 0.0, 0.0, 0.0, CLEAR)[BACK] == pytest.approx(0.3)  # the back edge works the same way
+
+
 def test_echoes_are_forgotten_and_never_lengthen_a_reading(memory):
     memory.add(0.0, 0.0, 0.0, 0.0, FRONT, 2.0)
     assert memory.ranges(1.0, 0.0, 0.0, 0.0, {FRONT: 0.8})[FRONT] == 0.8  # the nearer wins
