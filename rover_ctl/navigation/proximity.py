@@ -119,19 +119,21 @@ class ObstacleMemory:
         p = self.params
         half_rad = math.radians(p.sector_half_deg)
         edge_m = self._width_m() / 2.0 if p.edge_sectors and half_rad < math.pi / 2.0 else 0.0
-        sensors = [(e, n, math.cos(axis), math.sin(axis), edge_m if orientation % 4 == 0 else 0.0)  # math's: numpy's
+        # math's cos and sin: numpy's vectorised ones may round differently. A half edge for the
+        # sensors on the front and back edges (no sideways offset), 0 for the others.
+        sensors = [(e, n, math.cos(axis), math.sin(axis), edge_m if _EDGE[orientation % 8][1] == 0.0 else 0.0)
                    for orientation, (e, n, axis) in zip(latest_m, self._sensor_poses(latest_m, east_m, north_m, heading_rad))]  # fmt: skip
-        e, n, cos_axis, sin_axis, half_edge = np.array(sensors).T[:, :, None]  # (vectorised ones may round differently)
+        e, n, cos_axis, sin_axis, half_edge = np.array(sensors).T[:, :, None]
         d_east, d_north = points[:, 0] - e, points[:, 1] - n
         distance = np.hypot(d_east, d_north)
         along = d_east * cos_axis + d_north * sin_axis
         inside = along >= math.cos(half_rad) * distance  # within sector_half_deg of the axis
-        nearest_m = np.where(inside, distance, math.inf)
+        seen_m = np.where(inside, distance, math.inf)
         if edge_m > 0.0:  # the front and back edges' whole width (module docstring)
             beside = np.abs(d_north * cos_axis - d_east * sin_axis) - half_edge  # across the axis, beyond the edge's end
             ahead = (along > 0.0) & (beside <= along * math.tan(half_rad))
-            nearest_m = np.where(inside, nearest_m, np.where(ahead, np.hypot(along, np.maximum(beside, 0.0)), math.inf))
-        nearest = nearest_m.min(axis=1).tolist()
+            seen_m = np.where(inside, seen_m, np.where(ahead, np.hypot(along, np.maximum(beside, 0.0)), math.inf))
+        nearest = seen_m.min(axis=1).tolist()
         out = {}
         for (orientation, range_m), nearest_m in zip(latest_m.items(), nearest):
             out[orientation] = min(range_m, nearest_m) if range_m is not None and not math.isnan(range_m) else range_m
