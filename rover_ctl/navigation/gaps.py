@@ -544,7 +544,8 @@ class Passage:
             follow, self._follow = self._follow, None
             if follow is not None and time_s - follow[0] <= FRESH_S and not self._was_searched(follow[1], follow[3]) \
                     and self.gap_leads_to(Gap(follow[1], follow[3], 0.0, 0.0), pose_en, pose_heading_rad, goal_en) \
-                    and self._goal_line_ahead_m(follow[1:4], pose_en, pose_heading_rad, goal_en) <= p.search_m:  # fmt: skip
+                    and self._goal_line_ahead_m(follow[1:4], pose_en, pose_heading_rad, goal_en) <= p.search_m \
+                    and self._wall_ahead(follow[3]):  # fmt: skip
                 self._start_search(time_s, follow)
                 return self._searching(time_s, front, pose_en, pose_heading_rad, goal_en)
             candidate, self._candidate = self._candidate, None
@@ -578,6 +579,16 @@ class Passage:
                     and abs((point_en[0] - base[0]) * normal[0] + (point_en[1] - base[1]) * normal[1]) <= p.wall_range_m:  # fmt: skip
                 return True
         return False
+
+    def _wall_ahead(self, normal_en: EN) -> bool:
+        """The diagonal on the wall's side echoes within ``wall_range_m`` times sqrt(2) (where a
+        wall followed at ``wall_range_m`` crosses it): the wall goes on ahead. Free, the rover is
+        at an opening or the wall's end, which the rule base takes unaided. No such rangefinder:
+        the wall is taken to go on."""
+        odo = self.odometry
+        left = math.cos(odo.heading_rad + math.pi / 2.0 - math.atan2(normal_en[1], normal_en[0])) > 0.0
+        range_m = self._diagonal_m.get(FRONT_LEFT if left else FRONT_RIGHT)
+        return range_m is None or range_m <= self.params.wall_range_m * math.sqrt(2.0)
 
     def _start_search(self, time_s: float, follow: tuple[float, EN, EN, EN, float]) -> None:
         """Followed a wall across the way ``search_m`` with nothing found: search it back the other

@@ -363,3 +363,21 @@ def test_an_inspection_hands_back_when_a_moving_track_comes_near(monkeypatch, se
     assert outcome.success and not states
     outcome, states = _runner_episode(monkeypatch, "crossing", seed, MOVER_NEAR_M=0.0)
     assert not outcome.success and "inspect" in states
+
+
+def test_no_search_back_starts_where_the_wall_opens_ahead(monkeypatch):
+    """Following a wall ``search_m`` past the goal's line, the rover reached a 2.5 m opening (the
+    rule base's to take) just as the search was due: it searched the wall back the other way
+    instead, and went round both walls (in-process runner, walls seed 62: 54.1 m with the check,
+    88.8 m without). The front diagonal on the wall's side reads free there: no search."""
+    from rover_ctl.navigation.gaps import Passage
+
+    def run():
+        return drive_past_gap(PARAMS, gap_x=4.0, gap_m=2.5, start=(-1.0, 1.9, 0.0), duration_s=16.0, goal=(0.0, 13.0))[0]
+
+    opened = run()
+    assert "Narrow passage: searching the wall back the other way" not in opened.events
+    assert opened.path[-1][0] > 5.0  # on along the wall, past the opening
+    monkeypatch.setattr(Passage, "_wall_ahead", lambda self, normal_en: True)
+    blind = run()
+    assert "Narrow passage: searching the wall back the other way" in blind.events
