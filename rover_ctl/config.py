@@ -898,10 +898,9 @@ class ObstacleMapParams:
     enabled: bool = True
     """Fold persistent obstacles into the planner's map (off: the planner knows only fences,
     known obstacles and the circles of a stuck rover). On by default since 2026-11-28, with narrow
-    passages: against both off (2026-11-29's rows, with ``proximity.edge_sectors``) the cul-de-sac
-    takes 18 s less and walls 9 s less, every other scenario as many worlds complete or more
-    (docs/BENCHMARKS.md). `make demo`'s mission, lockstep, seeds 1-11: no contact,
-    169.4-175.3 m (169.0-174.4 m with the map in the odometry frame, 169.4-174.2 m with
+    passages: against both off (2026-11-29's rows) the cul-de-sac takes 20 s less and walls 11 s
+    less, every other scenario as many worlds complete or more (docs/BENCHMARKS.md). `make
+    demo`'s mission, lockstep, seeds 1-11: no contact, 169.4-175.3 m (169.0-174.4 m with the map in the odometry frame, 169.4-174.2 m with
     ``proximity.edge_sectors`` too, 2026-11-29). (Before the free-space rule, ``free_memory_s``,
     and the passages' hand-back, the map alone met the demo's looping walker in a way that ended
     in a collision in 3 of 18 runs, 1 of 15 with it off; docs/perception.md.)"""
