@@ -52,7 +52,9 @@ before it.
    the wall only once it is along it), is never swept. When a side beam has followed one flat wall
    that the goal lies beyond for ``search_m`` of travel with no narrow opening proved, and the
    straight line to the goal meets the wall's line at most ``search_m`` ahead (farther, the wall
-   runs along the way to the goal, as a cul-de-sac's side does going round it), the rover
+   runs along the way to the goal, as a cul-de-sac's side does going round it), and the front
+   diagonal on the wall's side still echoes within ``wall_range_m`` times sqrt(2) (free, the wall
+   opens or ends ahead, which the rule base takes unaided), the rover
    turns round and drives back along it, on a line parallel to the wall's fitted line at the
    distance it kept, at ``search_speed_mps``, the other side beam sweeping, to ``search_m`` beyond where
    the wall's echoes began. A gap proved on the way is lined up on (an opening that may be wide

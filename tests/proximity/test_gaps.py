@@ -310,9 +310,9 @@ def test_pushing_against_the_edge_stops_at_once_and_backs_out(monkeypatch):
 def _runner_episode(monkeypatch, scenario: str, seed: int, **constants):
     """An episode with narrow passages on, the persistent-obstacle map off and the tracker of
     ``SURE_ECHOES`` and the memory's ``CONE_SECTORS`` (the cases below were found so, and the map's
-    re-plans, other tracks and sectors take other ways past the same drums), in the in-process runner (the emulator's physics and sensors,
-    the daemon's autopilot), ``constants`` of the passage module replaced; its outcome and the
-    passage's state at each contact."""
+    re-plans, other tracks and sectors take other ways past the same drums), in the in-process
+    runner (the emulator's physics and sensors, the daemon's autopilot), ``constants`` of the
+    passage module replaced; its outcome and the passage's state at each contact."""
     from rover_ctl.fuzzy import load_rulebase
     from rover_ctl.navigation import gaps
     from rover_ctl.tuning.episode import Episode, episode_config
