@@ -587,10 +587,14 @@ class Passage:
         wall followed at ``wall_range_m`` crosses it): the wall goes on ahead. Free, the rover is
         at an opening or the wall's end, which the rule base takes unaided. No such rangefinder:
         the wall is taken to go on."""
-        odo = self.odometry
-        left = math.cos(odo.heading_rad + math.pi / 2.0 - math.atan2(normal_en[1], normal_en[0])) > 0.0
-        range_m = self._diagonal_m.get(FRONT_LEFT if left else FRONT_RIGHT)
+        range_m = self._diagonal_m.get(FRONT_LEFT if LEFT in self._wall_sides(normal_en) else FRONT_RIGHT)
         return range_m is None or range_m <= self.params.wall_range_m * math.sqrt(2.0)
+
+    def _wall_sides(self, normal_en: EN) -> list[int]:
+        """The side rangefinders facing the wall of normal ``normal_en`` (towards the wall), as
+        the rover is headed now."""
+        heading, wall_rad = self.odometry.heading_rad, math.atan2(normal_en[1], normal_en[0])
+        return [o for o, body in SIDE_BODY_RAD.items() if math.cos(heading + body - wall_rad) > 0.0]
 
     def _start_search(self, time_s: float, follow: tuple[float, EN, EN, EN, float]) -> None:
         """Followed a wall across the way ``search_m`` with nothing found: search it back the other
@@ -633,9 +637,7 @@ class Passage:
         direction = self._search_direction()
         de, dn = odo.east_m - base[0], odo.north_m - base[1]
         t_abs = de * -direction[0] + dn * -direction[1]  # along the wall the way it was followed
-        wall_side = [o for o, body in SIDE_BODY_RAD.items()
-                     if math.cos(odo.heading_rad + body - math.atan2(normal[1], normal[0])) > 0.0]  # fmt: skip
-        side = [self._sweeps[o][-1] for o in wall_side if self._sweeps[o]]
+        side = [self._sweeps[o][-1] for o in self._wall_sides(normal) if self._sweeps[o]]
         if any(math.isfinite(b.range_m) and b.range_m <= p.wall_range_m for b in side):
             self._search_free_from = None
         elif self._search_free_from is None:
