@@ -900,10 +900,11 @@ class ObstacleMapParams:
     known obstacles and the circles of a stuck rover). On by default since 2026-11-28, with narrow
     passages: against both off (2026-11-29's rows) the cul-de-sac takes 20 s less and walls 11 s
     less, every other scenario as many worlds complete or more (docs/BENCHMARKS.md). `make
-    demo`'s mission, lockstep, seeds 1-11: no contact, 169.4-175.3 m (169.0-174.4 m with the map in the odometry frame, 169.4-174.2 m with
-    ``proximity.edge_sectors`` too, 2026-11-29). (Before the free-space rule, ``free_memory_s``,
-    and the passages' hand-back, the map alone met the demo's looping walker in a way that ended
-    in a collision in 3 of 18 runs, 1 of 15 with it off; docs/perception.md.)"""
+    demo`'s mission, lockstep, seeds 1-11: no contact, 169.4-175.3 m (169.0-174.4 m with the map
+    in the odometry frame, 169.4-174.2 m with ``proximity.edge_sectors`` too, 2026-11-29).
+    (Before the free-space rule, ``free_memory_s``, and the passages' hand-back, the map alone met
+    the demo's looping walker in a way that ended in a collision in 3 of 18 runs, 1 of 15 with it
+    off; docs/perception.md.)"""
     cell_m: float = 0.5
     """Side of a grid cell (m): the resolution of the persistent obstacles."""
     miss_score: float = 0.5
