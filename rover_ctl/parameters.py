@@ -488,6 +488,7 @@ _DECLARED: tuple[tuple, ...] = (
     ("passage.search_speed_mps", "GAP_SEARCH_SPD", 0.05, 2.0, RW, {}),
     ("passage.timeout_s", "GAP_TIMEOUT", 1.0, 600.0, RW, {}),
     ("passage.reject_s", "GAP_REJECT", 0.0, 3600.0, RW, {}),
+    ("passage.wall_mapped_m", "GAP_WALL_MAP", 0.0, 5.0, RW, {}),
     ("pivot.angle_deg", "WP_PIVOT_ANGLE", 0.0, 360.0, RW, {"units": "deg"}),
     ("pivot.rate_dps", "WP_PIVOT_RATE", 1.0, 720.0, RW, {"units": "deg/s"}),
     ("pivot.heading_gain", "PIV_GAIN", 0.1, 20.0, RW, {"units": "1/s"}),

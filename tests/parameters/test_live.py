@@ -393,8 +393,9 @@ def mission_for_planner(d: Daemon) -> None:
 def ex_passage(d: Daemon) -> list:
     """A 1.5x-width gap beside the rover (tests/proximity/gap_world.py) driven past with the
     autopilot's passage, if on; then with it on: passed, the same gap again (rejected), a gap
-    0.3 m along (another one unless ``match_m`` says otherwise), something in the way, and a gap
-    the sweep placed 0.12 m off (the front beam's scan, the guard)."""
+    0.3 m along (another one unless ``match_m`` says otherwise), something in the way, a gap
+    the sweep placed 0.12 m off (the front beam's scan, the guard), and a gap in a wall the
+    obstacle map does not hold."""
     from proximity.gap_world import drive_past_gap
 
     from rover_ctl.navigation.odometry import Odometry
@@ -416,6 +417,8 @@ def ex_passage(d: Daemon) -> list:
     passage.reset()
     trace += run(t0_s=4000.0, side_lead_m=0.12, blocking=True)  # the same not scanned: the guard backs out
     d.config.passage.scan_max_deg = scan
+    passage.reset()
+    trace += run(t0_s=5000.0, map_holds_walls=False)  # a wall the map does not hold: not inspected (wall_mapped_m)
     d.config.passage.enabled = enabled
     return trace
 

@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from shapely.geometry import Polygon, box
+from shapely.geometry import Point, Polygon, box
 
 from rover_ctl.config import PassageParams, RobotParams
 from rover_ctl.navigation.gaps import Passage
@@ -93,16 +93,25 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
                    start: tuple[float, float, float] = (-2.0, 1.9, 0.0), cruise_mps: float = 0.5, t0_s: float = 0.0,
                    duration_s: float = 40.0, behind_m: float | None = None, passage: Passage | None = None,
                    pose_drift_mps: float = 0.0, seed: int = 0, yaw_lag_s: float = 0.0,
-                   blocking: bool = False, side_lead_m: float = 0.0, goal: tuple[float, float] | None = None) -> tuple[Run, Passage]:  # fmt: skip
+                   blocking: bool = False, side_lead_m: float = 0.0, goal: tuple[float, float] | None = None,
+                   map_holds_walls: bool | None = None) -> tuple[Run, Passage]:  # fmt: skip
     """Drive the scene; ``pose_drift_mps``: the pose given as 'fused' drifts from the truth this
     fast; ``side_lead_m``: the side rangefinders read from this far ahead of where they are (as
     if the pose they are placed with lagged the reading), so that the gap a sweep finds is off
-    its true place along the wall by about as much; ``goal``: 10 m beyond the opening unless given."""
+    its true place along the wall by about as much; ``goal``: 10 m beyond the opening unless given;
+    ``map_holds_walls``: the persistent-obstacle map the passage is given holds the walls (True),
+    nothing (False), or there is none (None)."""
     rng, drift_rng = np.random.default_rng(seed), np.random.default_rng(seed + 1)
     passage = passage or Passage(params, lambda: LENGTH, lambda: WIDTH)
     boxes = _walls(gap_x, gap_m, wall_y, behind_m)
     shapes = [box(*b) for b in boxes]
     x, y, h = start
+    mapped = None
+    if map_holds_walls is not None:  # the odometry's frame starts at the start pose
+        def mapped(point_en, distance_m):
+            c, s_ = math.cos(start[2]), math.sin(start[2])
+            world = Point(start[0] + c * point_en[0] - s_ * point_en[1], start[1] + s_ * point_en[0] + c * point_en[1])
+            return map_holds_walls and any(shape.distance(world) <= distance_m for shape in shapes)
     left = right = 0.0
     goal = goal or (gap_x, wall_y + 10.0)
     run, dt, through = Run(), 0.04, False
@@ -121,7 +130,7 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
             r = min(_ray(sx, sy, h + body + a, boxes) for a in RAYS) + rng.normal(0.0, 0.01)
             passage.on_range(t, o, round(r, 2) if r <= MAX_M else math.inf)
         drift += drift_rng.normal(0.0, 1.0, 2) * pose_drift_mps * dt * 5
-        drive = passage.step(t, (x + drift[0], y + drift[1]), h, (goal[0] + 0.0, goal[1]))
+        drive = passage.step(t, (x + drift[0], y + drift[1]), h, (goal[0] + 0.0, goal[1]), (), mapped)
         if drive is None:
             through = through or any("through" in e for e in passage.events)
             target = math.atan2(goal[1] - y, goal[0] - x) if through else 0.0
