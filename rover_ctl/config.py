@@ -877,8 +877,8 @@ class PassageParams:
     """An opening is inspected only when the persistent-obstacle map (``obstacle_map``) holds an
     obstacle within this (m) of the last echo of the wall before it. A walker passed at the side
     gives the side beam the same run of echoes as a wall that ends (its echo slides with the rover
-    as a wall's does, so the tracker sees no mover), and the slow inspection then let it catch up
-    from behind-left, where no beam looks (lockstep SITL, crossing world 18). 0: no such test;
+    as a wall's does), and the slow inspection then let it catch up from behind-left, where no
+    beam looks (lockstep SITL, crossing world 18; docs/perception.md). 0: no such test;
     with the map off or not in the odometry frame, inspections start without it."""
 
 

@@ -584,8 +584,8 @@ class Autopilot:
             tracks = self._movers(t_s, pose)
         if self.config.passage.enabled:  # a narrow passage: the manoeuvre drives, the rule base waits
             # (it hands back when a mover comes near: the yielder and the evader need the tracks)
-            drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal, tracks if tracking else (),
-                                      self._mapped_in_odometry if self.config.obstacle_map.enabled and self._map_link is not None else None)  # fmt: skip
+            mapped = self._mapped_in_odometry if self.config.obstacle_map.enabled and self._map_link is not None else None
+            drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal, tracks if tracking else (), mapped)
             for text in self.passage.events:
                 self._say(text)
             self.passage.events.clear()
