@@ -785,8 +785,9 @@ class PassageParams:
     enabled: bool = True
     """Look for narrow passages and drive through them (docs/perception.md, "Narrow passages"). On by
     default since 2026-11-28, with the persistent-obstacle map: together they drive the benchmark's
-    narrow_gap through its opening in 98 of 100 worlds (0 with both off, docs/BENCHMARKS.md). With
-    the map off, the search's return along a wall costs walls about 21 s (in-process runner)."""
+    narrow_gap through its opening in 99 of 100 worlds (0 with both off; lockstep SITL, 2026-11-29,
+    docs/BENCHMARKS.md). With the map off, the search's return along a wall costs walls about 21 s
+    (in-process runner)."""
     side_clearance_m: float = 0.02
     """An opening is passable when it was seen free over at least the footprint's width plus this
     much on each side (m). What a 15 degree cone sees free of a 0.6 m opening in a 0.3 m wall is
