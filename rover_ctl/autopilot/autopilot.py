@@ -584,7 +584,8 @@ class Autopilot:
             tracks = self._movers(t_s, pose)
         if self.config.passage.enabled:  # a narrow passage: the manoeuvre drives, the rule base waits
             # (it hands back when a mover comes near: the yielder and the evader need the tracks)
-            mapped = self._mapped_in_odometry if self.config.obstacle_map.enabled and self._map_link is not None else None
+            # (the map in the odometry's frame, the passages' own: it says which walls are held)
+            mapped = self.obstacle_map.near_persistent if self.config.obstacle_map.enabled and self._map_link is not None else None
             drive = self.passage.step(t_s, (pose.east_m, pose.north_m), pose.heading_rad, goal, tracks if tracking else (), mapped)
             for text in self.passage.events:
                 self._say(text)
@@ -703,11 +704,6 @@ class Autopilot:
         if link is not None:
             sensor_en, axis_rad = link.to_odometry(sensor_en), axis_rad + link.turn_rad
         self.obstacle_map.add(time_s, sensor_en[0], sensor_en[1], axis_rad, range_m, max_range_m, track_ident)
-
-    def _mapped_in_odometry(self, point_en: EN, distance_m: float) -> bool:
-        """Whether the persistent-obstacle map, kept in the odometry's frame, holds an obstacle
-        within ``distance_m`` of a point of that frame (the narrow passages' frame)."""
-        return self.obstacle_map.near_persistent(point_en[0], point_en[1], distance_m)
 
     def _to_map(self, point_en: EN) -> EN:
         """A point of the fused pose's frame in the obstacle map's: the odometry frame, where what

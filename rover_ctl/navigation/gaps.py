@@ -534,12 +534,13 @@ class Passage:
     # ---- the step ------------------------------------------------------------------------------
 
     def step(self, time_s: float, pose_en: EN, pose_heading_rad: float, goal_en: EN, tracks: Sequence[Track] = (),
-             mapped: Callable[[EN, float], bool] | None = None) -> Drive | None:  # fmt: skip
+             mapped: Callable[[float, float, float], bool] | None = None) -> Drive | None:  # fmt: skip
         """The command of this step, or None (the rule base drives). ``pose_*`` is the fused pose
         and ``goal_en`` the goal in its frame: they say only which side of the wall the goal is.
-        ``tracks``: the moving obstacle tracks, in that frame too. ``mapped(point, distance_m)``:
-        whether the persistent-obstacle map holds an obstacle within ``distance_m`` of a point of
-        the odometry's frame (None: no map in that frame; ``wall_mapped_m``)."""
+        ``tracks``: the moving obstacle tracks, in that frame too. ``mapped(east_m, north_m,
+        distance_m)``: whether the persistent-obstacle map holds an obstacle within ``distance_m``
+        of a point of the odometry's frame (``ObstacleMap.near_persistent``; None: no map in that
+        frame; ``wall_mapped_m``)."""
         p = self.params
         self._mover_m = min((math.hypot(t.east_m - pose_en[0], t.north_m - pose_en[1]) for t in tracks), default=math.inf)
         front, self._front = self._front, []
@@ -558,7 +559,7 @@ class Passage:
                 return None
             if any(math.dist(candidate[1].centre_en, c) <= p.match_m for _, c, _ in self._rejected):
                 return None
-            if p.wall_mapped_m > 0.0 and mapped is not None and not mapped(candidate[1].centre_en, p.wall_mapped_m):
+            if p.wall_mapped_m > 0.0 and mapped is not None and not mapped(*candidate[1].centre_en, p.wall_mapped_m):
                 return None  # a wall the map does not hold: maybe a walker passed at the side
             self.state, self._since_s, self.found, self._gap_proved = "inspect", time_s, None, False
             self._inspect_from, self._inspect_along = (

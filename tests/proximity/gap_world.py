@@ -108,9 +108,9 @@ def drive_past_gap(params: PassageParams, *, gap_x: float = 1.0, gap_m: float = 
     x, y, h = start
     mapped = None
     if map_holds_walls is not None:  # the odometry's frame starts at the start pose
-        def mapped(point_en, distance_m):
+        def mapped(east_m, north_m, distance_m):
             c, s_ = math.cos(start[2]), math.sin(start[2])
-            world = Point(start[0] + c * point_en[0] - s_ * point_en[1], start[1] + s_ * point_en[0] + c * point_en[1])
+            world = Point(start[0] + c * east_m - s_ * north_m, start[1] + s_ * east_m + c * north_m)
             return map_holds_walls and any(shape.distance(world) <= distance_m for shape in shapes)
     left = right = 0.0
     goal = goal or (gap_x, wall_y + 10.0)
