@@ -599,7 +599,8 @@ class YieldParams:
     """For this long after stepping aside from a walker (s), a new yield starts only within
     ``after_evasion_heading_off_deg`` of the course: the rover is turning back to its line, its
     tracks' velocities are swept, and a second walker coming head-on read as crossing would stop
-    the rover in its way instead of being stepped aside from (SITL ``head_on`` seed 13)."""
+    the rover in its way instead of being stepped aside from (SITL ``head_on`` seed 13). The walker
+    stepped aside from is held to ``max_heading_off_deg`` (it crosses after all: SITL ``crossing`` 80)."""
     after_evasion_heading_off_deg: float = 30.0
     """...the heading limit then (deg); the evader's own is ``evasion.max_heading_off_deg``."""
     max_wait_s: float = 10.0

@@ -615,7 +615,7 @@ class Autopilot:
             evade = self.evader.step(t_s, pose.east_m, pose.north_m, pose.heading_rad, pose.speed_mps, course, speed_mps, tracks, ranges,
                                      may_start=not yielding)  # fmt: skip
             if evade is not None:
-                self.yielder.evaded(t_s)
+                self.yielder.evaded(t_s, evade.track_ident)
                 self._evaded_s = t_s
                 row.update(evade_track=evade.track_ident)
                 return self._speed_and_turn(t_s, dt_s, evade.speed_mps, evade.yaw_rate_radps, row)

@@ -64,7 +64,11 @@ rule base has turned the rover from, the way it walks, must still be yielded to,
 rover's flank. For ``after_evasion_s`` after the evader last drove, the limit is
 ``after_evasion_heading_off_deg`` (30): the rover is turning back to its line, and a second walker
 coming head-on, its velocity swept sideways, would read as crossing and stop the rover in its way
-instead of being stepped aside from.
+instead of being stepped aside from. Not for the walker stepped aside from: when the evader ends
+its manoeuvre and that track crosses after all (its first estimate came at the rover), it is yielded
+to at once within ``max_heading_off_deg`` (lockstep SITL ``crossing`` world 80: the manoeuvre
+ended with the crosser's latched estimate behind the rover, the rover 32-40 degrees off its course,
+and the rule base turned it alongside the crosser, which struck its flank).
 
 **Hysteresis and lost tracks.** Once a track is yielded to, the rover keeps yielding to it until
 full speed clears it by ``release_margin_m`` more, or its course comes within half of
@@ -133,10 +137,12 @@ class Yielder:
         self._yielding: dict[int, Track] = {}
         """Tracks yielded to: the last estimate of each (a copy), kept while it is in conflict."""
         self._evaded_s = -math.inf
+        self._evaded_ident: int | None = None
 
-    def evaded(self, time_s: float) -> None:
-        """The evader (``rover_ctl.navigation.evasion``) drove the rover at ``time_s``."""
-        self._evaded_s = time_s
+    def evaded(self, time_s: float, track_ident: int | None = None) -> None:
+        """The evader (``rover_ctl.navigation.evasion``) drove the rover at ``time_s``, stepping
+        aside from track ``track_ident``."""
+        self._evaded_s, self._evaded_ident = time_s, track_ident
 
     def limit(self, east_m: float, north_m: float, course_rad: float, speed_mps: float,
               tracks: Iterable[Track], time_s: float, alive: Collection[int] = (),
@@ -161,7 +167,7 @@ class Yielder:
         radius_m = self._robot_radius_m() + p.margin_m
         min_share = math.sin(math.radians(p.min_cross_deg))
         off_limit_deg = p.after_evasion_heading_off_deg if time_s - self._evaded_s < p.after_evasion_s else p.max_heading_off_deg
-        off_course = heading_rad is not None and abs(math.remainder(heading_rad - course_rad, math.tau)) > math.radians(off_limit_deg)
+        off_deg = 0.0 if heading_rad is None else math.degrees(abs(math.remainder(heading_rad - course_rad, math.tau)))
         half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
         crossing = []
         for ident, track in candidates.items():
@@ -170,7 +176,7 @@ class Yielder:
             if ident in self._yielding:  # already yielded to: kept while it still crosses at half the angle
                 if ident in live and across_mps < half_share * track.speed_mps:
                     continue
-            elif (off_course or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
+            elif (off_deg > (p.max_heading_off_deg if ident == self._evaded_ident else off_limit_deg) or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
                   or track.hits < p.min_hits or track.velocity_var(-un, ue) > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
                 continue
             along_mps = track.v_east_mps * ue + track.v_north_mps * un  # either way: maybe the echo sliding

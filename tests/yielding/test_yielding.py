@@ -196,6 +196,26 @@ def test_just_after_stepping_aside_the_heading_limit_is_the_evaders():
     assert y.limit(0.0, 0.0, NORTH, 1.2, [late], 3.5, heading_rad=off).speed_limit_mps is not None
 
 
+def test_the_walker_stepped_aside_from_is_yielded_to_at_once_when_it_turns_out_to_cross():
+    """The evader stepped aside from track 1 (its first estimate came at the rover); its live
+    track now crosses. The narrower limit after an evasion is for a second walker: this one is
+    yielded to within ``max_heading_off_deg`` at once, another track is not (SITL crossing 80)."""
+    off = NORTH - math.radians(40.0)
+    y = yielder()
+    y.evaded(0.0, track_ident=1)
+    crosser = Track(1, 0.1, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
+    assert y.limit(0.0, 0.0, NORTH, 1.2, [crosser], 0.1, heading_rad=off).speed_limit_mps is not None
+    other = Track(2, 0.1, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
+    assert yielder_after(2, other, off) is not None and yielder_after(1, other, off) is None
+
+
+def yielder_after(evaded_ident: int, track: Track, heading_rad: float) -> float | None:
+    """The speed limit for ``track`` just after stepping aside from track ``evaded_ident``."""
+    y = yielder()
+    y.evaded(0.0, track_ident=evaded_ident)
+    return y.limit(0.0, 0.0, NORTH, 1.2, [track], 0.1, heading_rad=heading_rad).speed_limit_mps
+
+
 def test_a_rover_pointing_off_its_course_drives_on_out_of_a_walkers_lane_rather_than_stopping_in_it():
     """The rover points north, its target 40 degrees to the left (it is turning back to its
     course); a walker 1.5 m to the left walks east, across the spot the rover stands on. Going on
