@@ -97,7 +97,8 @@ def test_hold_stops_quickly_and_rtl_returns_home(tmp_path):
         run.arm()
         run.start_mission()
         assert run.wait_for(lambda p: 1 in p.reached, sim_timeout_s=60.0)
-        assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False  # get up to speed on the next leg
+        # Up to speed on the next leg, 15 m east: past the corner's pivot turn, 3 m along it.
+        assert run.wait_for(lambda p: p.position_en is not None and p.position_en[0] > 3.0, sim_timeout_s=30.0)
         assert run.set_mode(RoverMode.HOLD) == mavutil.mavlink.MAV_RESULT_ACCEPTED
         assert run.wait_for(lambda p: p.mode == RoverMode.HOLD, wall_timeout_s=10.0)  # heartbeats are 1 Hz wall
         assert run.wait_for(lambda p: False, sim_timeout_s=2.0) is False
