@@ -201,12 +201,11 @@ def test_the_walker_stepped_aside_from_is_yielded_to_at_once_when_it_turns_out_t
     track now crosses. The narrower limit after an evasion is for a second walker: this one is
     yielded to within ``max_heading_off_deg`` at once, another track is not (SITL crossing 80)."""
     off = NORTH - math.radians(40.0)
-    y = yielder()
-    y.evaded(0.0, track_ident=1)
     crosser = Track(1, 0.1, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
-    assert y.limit(0.0, 0.0, NORTH, 1.2, [crosser], 0.1, heading_rad=off).speed_limit_mps is not None
     other = Track(2, 0.1, -1.2, 1.5, 0.8, 0.0, hits=20, born_en=(-9.0, 1.5))
-    assert yielder_after(2, other, off) is not None and yielder_after(1, other, off) is None
+    assert yielder_after(1, crosser, off) is not None
+    assert yielder_after(1, other, off) is None  # a second walker: the evader's narrower limit
+    assert yielder_after(2, other, off) is not None
 
 
 def yielder_after(evaded_ident: int, track: Track, heading_rad: float) -> float | None:
