@@ -171,12 +171,13 @@ class Yielder:
         half_share = math.sin(math.radians(p.min_cross_deg / 2.0))
         crossing = []
         for ident, track in candidates.items():
+            limit_deg = p.max_heading_off_deg if ident == self._evaded_ident else off_limit_deg  # the one stepped aside from crosses
             e, n = track.position_at(time_s)
             across_mps = abs(track.v_north_mps * ue - track.v_east_mps * un)
             if ident in self._yielding:  # already yielded to: kept while it still crosses at half the angle
                 if ident in live and across_mps < half_share * track.speed_mps:
                     continue
-            elif (off_deg > (p.max_heading_off_deg if ident == self._evaded_ident else off_limit_deg) or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
+            elif (off_deg > limit_deg or across_mps < p.min_cross_mps or across_mps < min_share * track.speed_mps
                   or track.hits < p.min_hits or track.velocity_var(-un, ue) > p.max_speed_sd_mps**2 or track.travel_m < p.min_travel_m):
                 continue
             along_mps = track.v_east_mps * ue + track.v_north_mps * un  # either way: maybe the echo sliding
